@@ -1,0 +1,332 @@
+"""Rigid-body and pinhole-camera geometry: SE(3)/so(3), projection, warping, pyramids.
+
+Pure maths: nothing here reads files or plots.
+
+Conventions
+-----------
+- Poses are (4, 4) homogeneous matrices named after their frames: ``T_a_b`` maps points
+  expressed in frame b into frame a (``p_a = T_a_b @ p_b``). Trajectories are ``T_w_c``
+  (camera-to-world), as in TUM files.
+- Twists are ``xi = (v, w)``: translation part first (metres), rotation part second (radians),
+  shape (6,). ``exp(xi)`` is the SE(3) exponential; updates are left-multiplied:
+  ``T <- exp(delta) @ T``.
+- Images are (H, W[, C]); points are (N, 3); depth is float32 metres with 0 = invalid.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+_EPS = 1e-10
+
+
+def hat(w: np.ndarray) -> np.ndarray:
+    """Skew-symmetric matrix of a 3-vector: ``hat(w) @ x == cross(w, x)``.
+
+    Parameters
+    ----------
+    w : (3,) float
+    Returns
+    -------
+    (3, 3) float
+    """
+    w = np.asarray(w, dtype=float)
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: rotation vector (3,) radians -> rotation matrix (3, 3)."""
+    w = np.asarray(w, dtype=float)
+    theta = np.linalg.norm(w)
+    K = hat(w)
+    if theta < 1e-8:  # second-order Taylor expansion
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + np.sin(theta) / theta * K + (1.0 - np.cos(theta)) / theta**2 * K @ K
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) -> rotation vector (3,) radians, angle in [0, pi]."""
+    R = np.asarray(R, dtype=float)
+    cos = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(cos)
+    if theta < 1e-8:
+        return 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if np.pi - theta < 1e-5:  # near pi: axis from the symmetric part
+        B = (R + np.eye(3)) / 2.0
+        axis = np.sqrt(np.clip(np.diag(B), 0.0, None))
+        k = int(np.argmax(axis))
+        axis = B[k] / axis[k]  # signs relative to the largest component
+        axis /= np.linalg.norm(axis)
+        return theta * axis
+    return theta / (2.0 * np.sin(theta)) * np.array(
+        [R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]
+    )
+
+
+def _left_jacobian(w: np.ndarray) -> np.ndarray:
+    """Left Jacobian V of SO(3), so that the SE(3) translation is ``V @ v``."""
+    theta = np.linalg.norm(w)
+    K = hat(w)
+    if theta < 1e-8:
+        return np.eye(3) + 0.5 * K + K @ K / 6.0
+    return (
+        np.eye(3)
+        + (1.0 - np.cos(theta)) / theta**2 * K
+        + (theta - np.sin(theta)) / theta**3 * K @ K
+    )
+
+
+def se3_exp(xi: np.ndarray) -> np.ndarray:
+    """SE(3) exponential of a twist ``xi = (v, w)`` (6,) -> (4, 4) pose."""
+    xi = np.asarray(xi, dtype=float).reshape(6)
+    v, w = xi[:3], xi[3:]
+    T = np.eye(4)
+    T[:3, :3] = so3_exp(w)
+    T[:3, 3] = _left_jacobian(w) @ v
+    return T
+
+
+def se3_log(T: np.ndarray) -> np.ndarray:
+    """SE(3) logarithm: (4, 4) pose -> twist ``(v, w)`` (6,)."""
+    T = np.asarray(T, dtype=float)
+    w = so3_log(T[:3, :3])
+    v = np.linalg.solve(_left_jacobian(w), T[:3, 3])
+    return np.concatenate([v, w])
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform (4, 4) or a stack (N, 4, 4), without a general inverse."""
+    T = np.asarray(T, dtype=float)
+    R = T[..., :3, :3]
+    t = T[..., :3, 3]
+    Ti = np.zeros_like(T)
+    Rt = np.swapaxes(R, -1, -2)
+    Ti[..., :3, :3] = Rt
+    Ti[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, t)
+    Ti[..., 3, 3] = 1.0
+    return Ti
+
+
+def compose(*Ts: np.ndarray) -> np.ndarray:
+    """Product ``Ts[0] @ Ts[1] @ ...`` of poses (each (4, 4) or broadcastable stacks)."""
+    out = np.asarray(Ts[0], dtype=float)
+    for T in Ts[1:]:
+        out = out @ np.asarray(T, dtype=float)
+    return out
+
+
+def transform_points(T_a_b: np.ndarray, p_b: np.ndarray) -> np.ndarray:
+    """Apply a pose to points: (4, 4), (N, 3) in frame b -> (N, 3) in frame a."""
+    p_b = np.asarray(p_b)
+    return p_b @ T_a_b[:3, :3].T + T_a_b[:3, 3]
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Angle of a rotation matrix (3, 3) in degrees."""
+    return float(np.degrees(np.linalg.norm(so3_log(R))))
+
+
+# --------------------------------------------------------------------------- camera
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """Pinhole intrinsics of a depth-registered RGB-D camera (no distortion).
+
+    Attributes
+    ----------
+    fx, fy, cx, cy : float, pixels
+    width, height : int, pixels
+    depth_scale : float, stored depth units per metre (5000 for TUM and Bonn PNGs)
+    name : str, preset name or 'custom'
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int = 640
+    height: int = 480
+    depth_scale: float = 5000.0
+    name: str = "custom"
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) intrinsic matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def scaled(self, level: int) -> "PinholeCamera":
+        """Intrinsics of pyramid level ``level`` (each level halves the resolution).
+
+        Coarse pixel i covers fine pixels 2i and 2i + 1 (2x2 block averaging), so
+        ``c' = (c + 0.5) / 2 - 0.5``.
+        """
+        cam = self
+        for _ in range(level):
+            cam = PinholeCamera(
+                cam.fx / 2.0, cam.fy / 2.0, (cam.cx + 0.5) / 2.0 - 0.5, (cam.cy + 0.5) / 2.0 - 0.5,
+                cam.width // 2, cam.height // 2, cam.depth_scale, cam.name,
+            )
+        return cam
+
+
+def backproject(camera: PinholeCamera, u: np.ndarray, v: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """pi^-1: pixels and depth -> camera-frame points.
+
+    Parameters
+    ----------
+    u, v : (N,) float, pixel coordinates (column, row)
+    z : (N,) float, depth in metres
+    Returns
+    -------
+    (N, 3) float, points in the camera frame (metres)
+    """
+    x = (u - camera.cx) / camera.fx * z
+    y = (v - camera.cy) / camera.fy * z
+    return np.stack([x, y, z], axis=-1)
+
+
+def project(camera: PinholeCamera, p_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """pi: camera-frame points (N, 3) -> pixel coordinates ``(u, v)``, each (N,).
+
+    Points with z <= 0 give non-finite coordinates; callers test ``z > 0``.
+    """
+    z = p_c[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.fx * p_c[:, 0] / z + camera.cx
+        v = camera.fy * p_c[:, 1] / z + camera.cy
+    return u, v
+
+
+def depth_to_points(camera: PinholeCamera, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Back-project every valid depth pixel.
+
+    Parameters
+    ----------
+    depth : (H, W) float32, metres, 0 = invalid
+    Returns
+    -------
+    points : (N, 3) float, camera frame
+    index : (N,) int, flat pixel index ``v * W + u`` of each point
+    """
+    H, W = depth.shape
+    index = np.flatnonzero(depth.reshape(-1) > 0)
+    v, u = np.divmod(index, W)
+    return backproject(camera, u.astype(float), v.astype(float), depth.reshape(-1)[index]), index
+
+
+def warp_coordinates(
+    camera: PinholeCamera, depth_ref: np.ndarray, T_cur_ref: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """w(x, xi): where each reference pixel lands in the current frame.
+
+    Parameters
+    ----------
+    depth_ref : (H, W) float32, metres, 0 = invalid
+    T_cur_ref : (4, 4), reference-to-current camera transform
+    Returns
+    -------
+    map_u, map_v : (H, W) float32, pixel coordinates in the current image (NaN where invalid)
+    z_cur : (H, W) float32, depth of the transformed point in the current frame (NaN where invalid)
+    """
+    H, W = depth_ref.shape
+    v, u = np.mgrid[0:H, 0:W].astype(np.float32)
+    z = depth_ref.astype(np.float32)
+    x = (u - camera.cx) / camera.fx * z
+    y = (v - camera.cy) / camera.fy * z
+    R = T_cur_ref[:3, :3].astype(np.float32)
+    t = T_cur_ref[:3, 3].astype(np.float32)
+    X = R[0, 0] * x + R[0, 1] * y + R[0, 2] * z + t[0]
+    Y = R[1, 0] * x + R[1, 1] * y + R[1, 2] * z + t[1]
+    Z = R[2, 0] * x + R[2, 1] * y + R[2, 2] * z + t[2]
+    valid = (z > 0) & (Z > 1e-6)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mu = np.where(valid, camera.fx * X / Z + camera.cx, np.nan).astype(np.float32)
+        mv = np.where(valid, camera.fy * Y / Z + camera.cy, np.nan).astype(np.float32)
+    return mu, mv, np.where(valid, Z, np.nan).astype(np.float32)
+
+
+def warp_image(
+    camera: PinholeCamera, image_cur: np.ndarray, depth_ref: np.ndarray, T_cur_ref: np.ndarray
+) -> np.ndarray:
+    """Synthesise the reference view from the current image: ``I_cur(w(x, xi))``.
+
+    Parameters
+    ----------
+    image_cur : (H, W[, C]) image of the current frame
+    depth_ref : (H, W) float32 metres, depth of the reference frame
+    T_cur_ref : (4, 4)
+    Returns
+    -------
+    (H, W[, C]) float32, NaN where the warp leaves the image or depth is invalid
+    """
+    mu, mv, _ = warp_coordinates(camera, depth_ref, T_cur_ref)
+    mu, mv = np.nan_to_num(mu, nan=-1.0), np.nan_to_num(mv, nan=-1.0)
+    out = interpolate(image_cur.astype(np.float32), mu.reshape(-1), mv.reshape(-1))
+    return out.reshape(depth_ref.shape + image_cur.shape[2:])
+
+
+def interpolate(image: np.ndarray, u: np.ndarray, v: np.ndarray, wrap: bool = False) -> np.ndarray:
+    """Bilinear samples of an image at scattered sub-pixel positions, with ``cv2.remap``.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) float32
+    u, v : (N,) float, column / row coordinates (pixel centres at integers)
+    wrap : tile the image (textures) instead of returning NaN outside ``[0, W-1] x [0, H-1]``
+    Returns
+    -------
+    (N,) or (N, C) float32
+    """
+    n = u.size
+    cols = 1024  # remap maps are limited to 32767 rows: lay the N samples out as a block
+    rows = max(1, -(-n // cols))
+    mu = np.full(rows * cols, -1.0, np.float32)
+    mv = np.full(rows * cols, -1.0, np.float32)
+    mu[:n], mv[:n] = u, v
+    # replicate, then mark outside samples: a constant NaN border would leak into samples
+    # lying exactly on the last row or column (NaN * 0 weight)
+    border = cv2.BORDER_WRAP if wrap else cv2.BORDER_REPLICATE
+    out = cv2.remap(image, mu.reshape(rows, cols), mv.reshape(rows, cols), cv2.INTER_LINEAR,
+                    borderMode=border)
+    out = out.reshape((rows * cols,) + image.shape[2:])[:n]
+    if not wrap:
+        H, W = image.shape[:2]
+        outside = ~((u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1))
+        out = out.astype(np.float32, copy=False)
+        out[outside] = np.nan
+    return out
+
+
+def image_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
+    """Pyramid by 2x2 block averaging (``cv2.INTER_AREA``); level 0 is the input.
+
+    Block averaging puts coarse pixel i at fine coordinate 2i + 0.5, the convention of
+    :meth:`PinholeCamera.scaled` and :func:`depth_pyramid`.
+    """
+    pyr = [image]
+    for _ in range(levels - 1):
+        H, W = pyr[-1].shape[:2]
+        pyr.append(cv2.resize(pyr[-1], (W // 2, H // 2), interpolation=cv2.INTER_AREA))
+    return pyr
+
+
+def depth_pyramid(depth: np.ndarray, levels: int) -> list[np.ndarray]:
+    """Depth pyramid that averages only valid (non-zero) depths of each 2x2 block.
+
+    Plain smoothing would blend valid depth with the zeros of missing pixels. Here each coarse
+    pixel is the mean of the valid depths in its 2x2 block, or 0 when none is valid.
+    """
+    pyr = [depth.astype(np.float32)]
+    for _ in range(levels - 1):
+        d = pyr[-1]
+        H, W = d.shape
+        d = d[: H - H % 2, : W - W % 2]
+        blocks = d.reshape(H // 2, 2, W // 2, 2)
+        valid = (blocks > 0).sum(axis=(1, 3))
+        total = blocks.sum(axis=(1, 3))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pyr.append(np.where(valid > 0, total / np.maximum(valid, 1), 0.0).astype(np.float32))
+    return pyr

@@ -1,0 +1,45 @@
+"""Shared fixtures: real-data paths (skipped when absent) and cached synthetic scenes."""
+import os
+from pathlib import Path
+
+import pytest
+
+# evo's settings/plot modules write ~/.evo; keep any such write out of the user's home.
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+FR2_DESK = SHARED_DATA / "rgbd_dataset_freiburg2_desk_50"
+BONN_CROWD = SHARED_DATA / "rgbd_bonn_crowd_dev"
+FR1_GT = SHARED_DATA / "groundtruth_only" / "rgbd_dataset_freiburg1_xyz" / "groundtruth.txt"
+
+
+def need(path: Path):
+    if not path.exists():
+        pytest.skip(f"real data not available: {path} (the shared data folder beside the project)")
+    return path
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_home(tmp_path_factory):
+    home = tmp_path_factory.mktemp("home")
+    old = os.environ.get("HOME")
+    os.environ["HOME"] = str(home)
+    yield
+    if old is not None:
+        os.environ["HOME"] = old
+
+
+@pytest.fixture(scope="session")
+def synth_cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("synth")
+
+
+@pytest.fixture(scope="session")
+def scene(synth_cache):
+    """scene(name, frames, background=False) -> path of a generated sequence (cached)."""
+    from dynslam_lite.synth import ensure_scene
+
+    def make(name, frames, background=False):
+        return ensure_scene(synth_cache, name, frames, seed=0, background=background)
+
+    return make
