@@ -454,9 +454,6 @@ def open_sequence(
     root = Path(root)
     if not root.is_dir():
         raise SequenceError(f"{root}: sequence folder not found")
-    cam = camera if isinstance(camera, PinholeCamera) else (
-        camera_from_name(camera) if camera else guess_camera(root)
-    )
     rgb_list = read_file_list(root / "rgb.txt")
     if not rgb_list:
         raise SequenceError(f"{root / 'rgb.txt'}: lists no colour images (empty sequence)")
@@ -468,6 +465,9 @@ def open_sequence(
     depth_list = read_file_list(depth_path)
     if not depth_list:
         raise SequenceError(f"{depth_path}: lists no depth images: the sequence has no depth")
+    cam = camera if isinstance(camera, PinholeCamera) else (
+        camera_from_name(camera) if camera else guess_camera(root)
+    )
     ta = np.array([e[0] for e in rgb_list])
     tb = np.array([e[0] for e in depth_list])
     matches = associate(ta, tb, max_difference)

@@ -121,7 +121,11 @@ class _Level:
         self.du = cv2.Sobel(depth, cv2.CV_32F, 1, 0, ksize=1) * 0.5
         self.dv = cv2.Sobel(depth, cv2.CV_32F, 0, 1, ksize=1) * 0.5
         cross = cv2.erode(valid, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8))
-        self.dvalid = cross
+        # a depth sample interpolated across an object edge is meaningless: keep the depth
+        # residual on locally smooth surfaces (step per pixel < 2 % of depth + 5 mm)
+        step = np.maximum(np.abs(self.du), np.abs(self.dv))
+        smooth = (step < 0.02 * depth + 0.005).astype(np.float32)
+        cross = cv2.erode(cross * smooth, np.ones((3, 3), np.uint8))
         # one stacked image: a single remap samples everything
         self.stack = np.dstack([gray, self.gu, self.gv, depth, self.du, self.dv, cross])
 

@@ -1,0 +1,64 @@
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dynslam_lite.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_synth_run_evaluate_end_to_end(tmp_path, capsys):
+    seq = tmp_path / "rgbd_synth"
+    assert main(["synth", str(seq), "--scene", "walking_static", "--frames", "40", "--quiet"]) == 0
+    traj, stats = tmp_path / "est.txt", tmp_path / "stats.json"
+    assert main(["run", "static-dense", str(seq), "--out", str(traj), "--stats", str(stats),
+                 "--frames", "35", "--set", "finest_level=2", "--quiet"]) == 0
+    s = json.loads(stats.read_text())
+    assert s["frames"] == 35 and s["failed_frames"] == [] and s["ms_per_frame"] > 0
+    assert {"load", "align"} <= set(s["stages"]) and s["peak_mem_mib"] > 0
+    assert s["params"]["finest_level"] == 2
+    assert len(traj.read_text().splitlines()) == 36  # header + 35 poses
+    capsys.readouterr()
+    assert main(["evaluate", str(seq / "groundtruth.txt"), str(traj), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["matched_poses"] == 35 and out["ate_m"]["rmse"] < 0.5
+    assert out["rpe_trans_m_per_s"]["count"] > 0
+
+
+def test_errors_name_the_problem(tmp_path, capsys):
+    assert main(["run", "static-dense", str(tmp_path), "--out", str(tmp_path / "t.txt")]) == 2
+    assert "rgb.txt: file not found" in capsys.readouterr().err
+    assert main(["run", "static-dense", str(tmp_path), "--out", "x", "--set", "bogus"]) == 2
+    seq = tmp_path / "s"
+    main(["synth", str(seq), "--scene", "static_xyz", "--frames", "3", "--quiet"])
+    assert main(["run", "static-dense", str(seq), "--out", str(tmp_path / "t.txt"),
+                 "--set", "nonsense=1"]) == 2
+    assert "unknown parameter(s) nonsense" in capsys.readouterr().err
+
+
+def test_reproduce_quick_and_failed_run_keeps_reports(tmp_path, capsys):
+    reports = tmp_path / "reports"
+    cache = tmp_path / "cache"
+    args = ["reproduce", "--profile", "quick", "--frames", "12", "--jobs", "1",
+            "--cache", str(cache), "--reports", str(reports)]
+    assert main(args) == 0
+    table = (reports / "tables" / "baselines.md").read_text()
+    assert "synthetic/walking_xyz" in table and "opencv-odometry" in table
+    assert main(args) == 0
+    assert (reports / "tables" / "baselines.md").read_text() == table  # deterministic
+    bad = tmp_path / "rgbd_broken"
+    bad.mkdir()
+    (bad / "rgb.txt").write_text("1.0 rgb/x.png\n")
+    assert main(args + ["--data", str(bad)]) == 2
+    assert (reports / "tables" / "baselines.md").read_text() == table
+    assert not [p for p in reports.iterdir() if p.name.startswith(".tmp")]
+
+
+def test_module_entry_point_help():
+    out = subprocess.run([sys.executable, "-m", "dynslam_lite", "--help"], cwd=ROOT,
+                         capture_output=True, text=True, check=True).stdout
+    for cmd in ("synth", "run", "evaluate", "bench", "reproduce"):
+        assert cmd in out

@@ -1,0 +1,123 @@
+import itertools
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import BONN_CROWD, FR1_GT, need
+from dynslam_lite.geometry import se3_exp
+from dynslam_lite.io import (SequenceError, Trajectory, associate, bonn_marker_to_camera,
+                             open_sequence, read_file_list, read_trajectory, write_trajectory)
+
+
+def _tum_associate(a, b, max_difference=0.02):
+    """TUM associate.py, literally: all pairs, sorted, taken greedily."""
+    first, second = list(a), list(b)
+    pairs = sorted((abs(x - y), x, y) for x in first for y in second if abs(x - y) < max_difference)
+    out = []
+    for _, x, y in pairs:
+        if x in first and y in second:
+            first.remove(x)
+            second.remove(y)
+            out.append((x, y))
+    return sorted(out)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_association_matches_tum_associate(seed):
+    rng = np.random.default_rng(seed)
+    a = np.sort(rng.uniform(0, 5, 120))
+    b = np.sort(rng.uniform(0, 5, 110))
+    ours = [(a[i], b[j]) for i, j in associate(a, b)]
+    assert ours == _tum_associate(a, b)
+
+
+def _write_sequence(root, n=3, depth_dtype=np.uint16, size=(64, 48), depth_size=None):
+    (root / "rgb").mkdir(parents=True)
+    (root / "depth").mkdir()
+    rgb_lines, depth_lines = ["# color images"], ["# depth maps"]
+    for i in range(n):
+        t = 10.0 + i / 30
+        cv2.imwrite(str(root / "rgb" / f"{t:.6f}.png"), np.full(size[::-1] + (3,), 100, np.uint8))
+        dsize = depth_size or size
+        cv2.imwrite(str(root / "depth" / f"{t + 0.005:.6f}.png"), np.full(dsize[::-1], 5000 if depth_dtype == np.uint16 else 50, depth_dtype))
+        rgb_lines.append(f"{t:.6f} rgb/{t:.6f}.png")
+        depth_lines.append(f"{t + 0.005:.6f} depth/{t + 0.005:.6f}.png")
+    (root / "rgb.txt").write_text("\n".join(rgb_lines) + "\n")
+    (root / "depth.txt").write_text("\n".join(depth_lines) + "\n")
+    (root / "camera.txt").write_text(f"100 100 32 24 {size[0]} {size[1]} 5000\n")
+    return root
+
+
+def test_reads_valid_sequence_lazily(tmp_path):
+    seq = open_sequence(_write_sequence(tmp_path / "s", n=5))
+    assert len(seq) == 5 and seq.window(1, 2).timestamps[0] == pytest.approx(10 + 1 / 30)
+    f = seq[2]
+    assert f.rgb.shape == (48, 64, 3) and f.depth.dtype == np.float32 and np.allclose(f.depth, 1.0)
+
+
+@pytest.mark.parametrize("breakage, message", [
+    (lambda r: (r / "rgb.txt").unlink(), "rgb.txt: file not found"),
+    (lambda r: (r / "rgb.txt").write_text("# nothing\n"), "empty sequence"),
+    (lambda r: (r / "rgb.txt").write_text("10.0 rgb/a.png\nabc rgb/b.png\n"), "rgb.txt:2: expected a timestamp"),
+    (lambda r: (r / "rgb.txt").write_text("10.0\n"), "rgb.txt:1: expected at least 2 columns"),
+    (lambda r: (r / "rgb.txt").write_text("10.1 rgb/a.png\n10.0 rgb/b.png\n"), "rgb.txt:2: timestamps not increasing"),
+    (lambda r: (r / "depth.txt").unlink(), "has no depth"),
+    (lambda r: (r / "depth.txt").write_text("# none\n"), "the sequence has no depth"),
+    (lambda r: (r / "depth.txt").write_text("99.0 depth/x.png\n"), "no colour image has a depth image"),
+    (lambda r: (r / "camera.txt").unlink(), "unknown camera"),
+])
+def test_bad_input_is_named(tmp_path, breakage, message):
+    root = _write_sequence(tmp_path / "seq")
+    breakage(root)
+    with pytest.raises(SequenceError, match=message):
+        open_sequence(root)
+
+
+def test_bad_images_are_named(tmp_path):
+    root = _write_sequence(tmp_path / "a")
+    first_rgb = sorted((root / "rgb").iterdir())[0]
+    first_rgb.write_bytes(b"not a png")
+    with pytest.raises(SequenceError, match=f"{first_rgb.name}: cannot read image"):
+        open_sequence(root)[0]
+    root = _write_sequence(tmp_path / "b", depth_dtype=np.uint8)
+    with pytest.raises(SequenceError, match="depth must be a single-channel 16-bit PNG"):
+        open_sequence(root)[0]
+    root = _write_sequence(tmp_path / "c", depth_size=(32, 24))
+    with pytest.raises(SequenceError, match="differs from colour size"):
+        open_sequence(root)[0]
+
+
+def test_unknown_camera_preset(tmp_path):
+    with pytest.raises(SequenceError, match="unknown camera 'kinect9'"):
+        open_sequence(_write_sequence(tmp_path / "s"), camera="kinect9")
+
+
+def test_header_quirk_of_tum_fr1():
+    traj = read_trajectory(need(FR1_GT))
+    assert len(traj) == 3000 and traj.timestamps[0] == pytest.approx(1305031098.6659)
+
+
+def test_header_quirk_constructed(tmp_path):
+    p = tmp_path / "groundtruth.txt"
+    p.write_text("# gt\ntimestamp tx ty tz qx qy qz qw\n1.0 0 0 0 0 0 0 1\n")
+    assert len(read_file_list(p, 8)) == 1
+
+
+def test_trajectory_round_trip(tmp_path):
+    rng = np.random.default_rng(0)
+    poses = np.stack([se3_exp(rng.normal(size=6)) for _ in range(5)])
+    traj = Trajectory(100 + np.arange(5) / 30, poses)
+    write_trajectory(tmp_path / "t.txt", traj)
+    back = read_trajectory(tmp_path / "t.txt")
+    assert np.allclose(back.poses, poses, atol=2e-6) and np.allclose(back.timestamps, traj.timestamps)
+
+
+def test_bonn_conversion_is_rigid_and_applied():
+    T = bonn_marker_to_camera()
+    assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-9)
+    assert np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
+    seq = open_sequence(need(BONN_CROWD))
+    raw = read_trajectory(BONN_CROWD / "groundtruth.txt")
+    assert seq.camera.name == "bonn"
+    assert np.allclose(seq.groundtruth.poses, raw.poses @ T)
