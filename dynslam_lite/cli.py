@@ -106,6 +106,12 @@ PROFILES = {
 }
 
 
+def _scene_job(job: tuple) -> str:
+    """Generate (or find cached) one synthetic scene; runs in a worker process."""
+    cache, scene, frames, seed = job
+    return str(ensure_scene(cache, scene, frames, seed))
+
+
 def _evaluate_job(job: tuple) -> dict:
     """One (sequence, method) run, evaluated; runs in a worker process."""
     label, path, camera, count, method = job
@@ -123,18 +129,20 @@ def cmd_reproduce(a) -> int:
     cache = Path(a.cache)
     t0 = time.perf_counter()
     jobs = []
-    for scene in prof["scenes"]:
-        print(f"[data] synthetic {scene}: {frames} frames", flush=True)
-        path = ensure_scene(cache, scene, frames, a.seed)
-        jobs += [(f"synthetic/{scene}", str(path), None, None, m) for m in BASELINES]
     for d in a.data or []:
-        seq = open_sequence(d)  # validates early, with a clear error
+        seq = open_sequence(d)  # validate real data before any long work, with a clear error
         print(f"[data] {d}: {len(seq)} frames", flush=True)
-        jobs += [(f"real/{Path(d).resolve().name}", d, None, None, m) for m in BASELINES]
-    results = []
     # spawn, not fork: a forked child inherits OpenCV's thread pool in a broken state and hangs
     with ProcessPoolExecutor(max_workers=a.jobs, mp_context=mp.get_context("spawn")) as pool:
-        for job, res in zip(jobs, pool.map(_evaluate_job, jobs)):
+        scenes = list(prof["scenes"])
+        paths = pool.map(_scene_job, [(str(cache), s, frames, a.seed) for s in scenes])
+        for scene, path in zip(scenes, paths):
+            print(f"[data] synthetic {scene}: {frames} frames at {path}", flush=True)
+            jobs += [(f"synthetic/{scene}", path, None, None, m) for m in BASELINES]
+        for d in a.data or []:
+            jobs += [(f"real/{Path(d).resolve().name}", d, None, None, m) for m in BASELINES]
+        results = []
+        for res in pool.map(_evaluate_job, jobs):
             print(f"[run] {res['sequence']:36s} {res['method']:16s} ATE {res['ate_m']['rmse']:.4f} m "
                   f"RPE {res['rpe_trans_m_per_s']['rmse']:.4f} m/s "
                   f"{res['rpe_rot_deg_per_s']['rmse']:.3f} deg/s", flush=True)
