@@ -10,7 +10,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from .evaluation import evaluate
-from .io import SequenceError, atomic_write_text, open_sequence, read_trajectory, write_trajectory
+from .io import (SequenceError, Trajectory, atomic_write_text, bonn_marker_to_camera, is_bonn,
+                 open_sequence, read_trajectory, write_trajectory)
 from .pipeline import METHODS, parse_value, run_method
 from .reports import ReportWriter
 from .synth import SCENES, ensure_scene, generate
@@ -53,8 +54,7 @@ def cmd_run(a) -> int:
 def cmd_evaluate(a) -> int:
     gt_path = Path(a.gt)
     gt = read_trajectory(gt_path)
-    if a.bonn or (a.bonn is None and "bonn" in gt_path.resolve().parent.name.lower()):
-        from .io import Trajectory, bonn_marker_to_camera
+    if a.bonn or (a.bonn is None and is_bonn(gt_path.parent)):
 
         gt = Trajectory(gt.timestamps, gt.poses @ bonn_marker_to_camera())
     errors = evaluate(gt, read_trajectory(a.est))
