@@ -15,9 +15,11 @@ from .io import (SequenceError, Trajectory, atomic_write_text, bonn_marker_to_ca
 from .pipeline import METHODS, parse_value, run_method
 from .reports import ReportWriter
 from .synth import SCENES, ensure_scene, generate
+from . import tables
 
 DEFAULT_CACHE = Path("build") / "data"
 BASELINES = ("static-dense", "opencv-odometry")
+REPRODUCED = BASELINES + ("depthcluster",)
 
 
 def _parse_sets(items: list[str]) -> dict:
@@ -87,13 +89,13 @@ def cmd_bench(a) -> int:
         print(f"generator: {a.scene}, {a.frames} frames at 640x480 in {dt:.1f} s = "
               f"{a.frames / dt:.2f} frames/s")
         seq = open_sequence(path.path)
-    print(f"{'method':18s} {'stage':8s} {'mean ms':>9s} {'median ms':>10s}")
+    print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s}")
     for method in a.methods:
         r = run_method(method, seq)
         for stage, ms in r.stage_ms.items():
-            print(f"{method:18s} {stage:8s} {np.mean(ms):9.1f} {np.median(ms):10.1f}")
+            print(f"{method:18s} {stage:10s} {np.mean(ms):9.1f} {np.median(ms):10.1f}")
         s = r.stats()
-        print(f"{method:18s} {'total':8s} {s['ms_per_frame']:9.1f} {np.median(r.frame_ms):10.1f}"
+        print(f"{method:18s} {'total':10s} {s['ms_per_frame']:9.1f} {np.median(r.frame_ms):10.1f}"
               f"   peak memory {s['peak_mem_mib']:.0f} MiB")
     return 0
 
@@ -119,7 +121,8 @@ def _evaluate_job(job: tuple) -> dict:
     r = run_method(method, seq)
     e = evaluate(seq.groundtruth, r.trajectory)
     return {"sequence": label, "method": method, "frames": len(seq), **e.as_dict(),
-            "failed_frames": len(r.failed_frames), "ms_per_frame": r.stats()["ms_per_frame"]}
+            "failed_frames": len(r.failed_frames), "ms_per_frame": r.stats()["ms_per_frame"],
+            "extras": r.extras}
 
 
 def cmd_reproduce(a) -> int:
@@ -138,9 +141,9 @@ def cmd_reproduce(a) -> int:
         paths = pool.map(_scene_job, [(str(cache), s, frames, a.seed) for s in scenes])
         for scene, path in zip(scenes, paths):
             print(f"[data] synthetic {scene}: {frames} frames at {path}", flush=True)
-            jobs += [(f"synthetic/{scene}", path, None, None, m) for m in BASELINES]
+            jobs += [(f"synthetic/{scene}", path, None, None, m) for m in REPRODUCED]
         for d in a.data or []:
-            jobs += [(f"real/{Path(d).resolve().name}", d, None, None, m) for m in BASELINES]
+            jobs += [(f"real/{Path(d).resolve().name}", d, None, None, m) for m in REPRODUCED]
         results = []
         for res in pool.map(_evaluate_job, jobs):
             print(f"[run] {res['sequence']:36s} {res['method']:16s} ATE {res['ate_m']['rmse']:.4f} m "
@@ -149,22 +152,19 @@ def cmd_reproduce(a) -> int:
             results.append(res)
     writer = ReportWriter(a.reports)
     try:
-        header = ["sequence", "frames", "method", "ATE RMSE (m)", "ATE max (m)", "ATE min (m)",
-                  "RPE trans RMSE (m/s)", "RPE rot RMSE (deg/s)", "failed frames"]
-        rows = [[r["sequence"], r["frames"], r["method"], r["ate_m"]["rmse"], r["ate_m"]["max"],
-                 r["ate_m"]["min"], r["rpe_trans_m_per_s"]["rmse"], r["rpe_rot_deg_per_s"]["rmse"],
-                 r["failed_frames"]] for r in results]
+        src = (f" Run: `python -m dynslam_lite reproduce --profile {a.profile}` "
+               f"(synthetic seed {a.seed}).")
+        for stem, title, make in (
+            ("summary", f"Every method on every sequence ({a.profile} profile, measured)", tables.summary),
+            ("paper_a_table1", "Paper A, Table 1: relative pose error (RMSE)", tables.paper_a_table1),
+            ("paper_a_table2", "Paper A, Table 2: absolute trajectory error (m)", tables.paper_a_table2),
+            ("paper_a_masks", "Paper A: moving-object masks of depthcluster against ground truth",
+             tables.paper_a_masks),
+        ):
+            header, rows, notes = make(results)
+            writer.table(f"tables/{stem}", title, header, rows, notes=notes + src)
         writer.table(
-            "tables/baselines", f"Static-world baselines ({a.profile} profile, measured)",
-            header, rows,
-            notes=("Measured by `python -m dynslam_lite reproduce` on the data named in the first "
-                   "column (synthetic = the embedded generator, seed "
-                   f"{a.seed}). ATE: SE(3)-aligned, 0.02 s association; RPE: 1-s pairs as TUM's "
-                   "evaluate_rpe.py ('-' where the clip is shorter than the 1-s delta). "
-                   "Timings are in baselines_timing.md."),
-        )
-        writer.table(
-            "tables/baselines_timing", "Static-world baselines: time per frame (machine-dependent)",
+            "tables/timing", "Time per frame of every run (machine-dependent)",
             ["sequence", "method", "ms/frame"],
             [[r["sequence"], r["method"], f"{r['ms_per_frame']:.1f}"] for r in results],
             notes="Wall-clock milliseconds per frame, whole pipeline, measured during the run on "
@@ -219,7 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--scene", default="walking_xyz", choices=SCENES)
     b.add_argument("--frames", type=int, default=60)
     b.add_argument("--camera", default=None)
-    b.add_argument("--methods", nargs="+", default=list(BASELINES), choices=sorted(METHODS))
+    b.add_argument("--methods", nargs="+", default=list(REPRODUCED), choices=sorted(METHODS))
     b.add_argument("--cache", default=str(DEFAULT_CACHE))
     b.set_defaults(func=cmd_bench)
 

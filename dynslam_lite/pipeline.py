@@ -19,6 +19,7 @@ import numpy as np
 
 from .geometry import invert
 from .io import Frame, RGBDSequence, Trajectory
+from .depthcluster import DepthClusterMethod
 from .odometry.dense import DenseConfig, align
 from .odometry.opencv_odometry import OpenCVOdometry, OpenCVOdometryConfig
 
@@ -76,6 +77,7 @@ class RunResult:
             },
             "peak_mem_mib": self.peak_mem_mib,
             "params": self.params,
+            **({"extras": self.extras} if self.extras else {}),
         }
 
 
@@ -111,7 +113,7 @@ class OpenCVMethod:
         return T, ok, "" if ok else "cv2.Odometry.compute returned False"
 
 
-METHODS: dict[str, type] = {m.name: m for m in (StaticDense, OpenCVMethod)}
+METHODS: dict[str, type] = {m.name: m for m in (StaticDense, OpenCVMethod, DepthClusterMethod)}
 
 
 def parse_value(text: str) -> Any:
@@ -130,16 +132,26 @@ def parse_value(text: str) -> Any:
 
 
 def make_config(config_type, overrides: dict[str, Any] | None):
-    """Build a config dataclass, rejecting unknown keys with the list of known ones."""
-    overrides = dict(overrides or {})
-    known = {f.name for f in dataclasses.fields(config_type)}
-    unknown = sorted(set(overrides) - known)
-    if unknown:
-        raise ValueError(
-            f"unknown parameter(s) {', '.join(unknown)} for {config_type.__name__}; "
-            f"known: {', '.join(sorted(known))}"
-        )
-    return config_type(**overrides)
+    """Build a config dataclass, rejecting unknown keys with the list of known ones.
+
+    Nested configs are reached with dotted keys, e.g. ``dense.lambda_depth=0.5``.
+    """
+    config = config_type()
+    for key, value in (overrides or {}).items():
+        obj, parts = config, key.split(".")
+        for i, part in enumerate(parts):
+            known = {f.name for f in dataclasses.fields(obj)}
+            if part not in known:
+                raise ValueError(
+                    f"unknown parameter {key!r} for {config_type.__name__}; known at "
+                    f"{'.'.join(parts[:i]) or 'top level'}: {', '.join(sorted(known))}"
+                )
+            if i < len(parts) - 1:
+                obj = getattr(obj, part)
+                if not dataclasses.is_dataclass(obj):
+                    raise ValueError(f"{'.'.join(parts[:i + 1])} is not a group of parameters")
+        setattr(obj, parts[-1], value)
+    return config
 
 
 def run_method(
@@ -195,7 +207,8 @@ def run_method(
         if on_frame:
             on_frame(i)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
+    extras = tracker.extras() if hasattr(tracker, "extras") else {}
     return RunResult(
         method, Trajectory(seq.timestamps.copy(), np.stack(poses)), failed, dict(stage_ms),
-        frame_ms, peak, dataclasses.asdict(config),
+        frame_ms, peak, dataclasses.asdict(config), extras,
     )

@@ -36,7 +36,7 @@ def test_errors_name_the_problem(tmp_path, capsys):
     main(["synth", str(seq), "--scene", "static_xyz", "--frames", "3", "--quiet"])
     assert main(["run", "static-dense", str(seq), "--out", str(tmp_path / "t.txt"),
                  "--set", "nonsense=1"]) == 2
-    assert "unknown parameter(s) nonsense" in capsys.readouterr().err
+    assert "unknown parameter 'nonsense'" in capsys.readouterr().err
 
 
 def test_reproduce_quick_and_failed_run_keeps_reports(tmp_path, capsys):
@@ -45,15 +45,17 @@ def test_reproduce_quick_and_failed_run_keeps_reports(tmp_path, capsys):
     args = ["reproduce", "--profile", "quick", "--frames", "12", "--jobs", "1",
             "--cache", str(cache), "--reports", str(reports)]
     assert main(args) == 0
-    table = (reports / "tables" / "baselines.md").read_text()
-    assert "synthetic/walking_xyz" in table and "opencv-odometry" in table
+    table = (reports / "tables" / "summary.md").read_text()
+    assert "synthetic/walking_xyz" in table and "opencv-odometry" in table and "depthcluster" in table
+    a1 = (reports / "tables" / "paper_a_table1.md").read_text()
+    assert "DVO (published)" in a1 and "fr3/walking_xyz" in a1
     assert main(args) == 0
-    assert (reports / "tables" / "baselines.md").read_text() == table  # deterministic
+    assert (reports / "tables" / "summary.md").read_text() == table  # deterministic
     bad = tmp_path / "rgbd_broken"
     bad.mkdir()
     (bad / "rgb.txt").write_text("1.0 rgb/x.png\n")
     assert main(args + ["--data", str(bad)]) == 2
-    assert (reports / "tables" / "baselines.md").read_text() == table
+    assert (reports / "tables" / "summary.md").read_text() == table
     assert not [p for p in reports.iterdir() if p.name.startswith(".tmp")]
 
 

@@ -1,0 +1,202 @@
+"""Step 1 of paper A: depth k-means clustering and depth hole filling (sec. 3, sec. 6.1, fig. 2).
+
+The depth image is split into ``n = floor((D_max - D_min) / D_sd)`` depth layers (eq. 1) by
+1-D k-means. Zero-depth holes are filled first, so that every measured surface gets a layer:
+
+* enclosed holes by grey-scale morphological reconstruction (hole filling by reconstruction by
+  erosion: a hole takes the lowest level at which it would spill out, i.e. the surrounding
+  depth), as ``imfill`` does;
+* zero runs left at object edges (the Kinect shadow beside a depth jump) from the nearest valid
+  pixel to their right, up to ``max_edge_run`` pixels (sec. 6.1).
+
+Filled depth is used for clustering and pre-removal only; the pose is estimated on measured
+depth, because a filled value is not a measurement.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.cluster.vq import kmeans2
+
+_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+
+
+def cluster_count(depth: np.ndarray, min_clusters: int = 2, max_clusters: int = 12) -> int:
+    """Eq. 1: ``floor((D_max - D_min) / D_sd)`` over the valid depths, clamped to a sane range.
+
+    Parameters
+    ----------
+    depth : (H, W) metres, 0 = invalid
+    """
+    z = depth[depth > 0]
+    if z.size < 2 or z.std() == 0:
+        return min_clusters
+    n = int(np.floor((z.max() - z.min()) / z.std()))
+    return int(np.clip(n, min_clusters, max_clusters))
+
+
+def fill_holes(depth: np.ndarray, max_iterations: int = 1000) -> np.ndarray:
+    """Fill enclosed zero-depth holes by morphological reconstruction by erosion.
+
+    The marker is the image on its border and +inf inside; geodesic erosions above the image
+    (``marker = max(erode(marker), image)``) are repeated until stable. Measured pixels keep
+    their value; a zero hole not touching the image border rises to the lowest depth on a path
+    out of it. Holes touching the border stay zero (nothing encloses them).
+
+    Parameters
+    ----------
+    depth : (H, W) float32 metres, 0 = invalid
+    Returns
+    -------
+    (H, W) float32
+    """
+    img = depth.astype(np.float32)
+    holes = img <= 0
+    if not holes.any():
+        return img.copy()
+    marker = np.where(holes, np.float32(np.inf), img)
+    marker[0, :], marker[-1, :], marker[:, 0], marker[:, -1] = img[0, :], img[-1, :], img[:, 0], img[:, -1]
+    # only hole pixels can change: iterate on their bounding box (plus a margin)
+    v, u = np.nonzero(holes)
+    r0, r1 = max(v.min() - 1, 0), min(v.max() + 2, img.shape[0])
+    c0, c1 = max(u.min() - 1, 0), min(u.max() + 2, img.shape[1])
+    m, im = marker[r0:r1, c0:c1], img[r0:r1, c0:c1]
+    for _ in range(max_iterations):
+        nxt = np.maximum(cv2.erode(m, _CROSS, borderType=cv2.BORDER_REPLICATE), im)
+        if np.array_equal(nxt, m):
+            break
+        m = nxt
+    marker[r0:r1, c0:c1] = m
+    marker[~np.isfinite(marker)] = 0.0
+    return marker
+
+
+def fill_edge_zeros(depth: np.ndarray, max_edge_run: int = 12) -> np.ndarray:
+    """Fill zero runs of at most ``max_edge_run`` pixels from the nearest valid pixel to the right.
+
+    Longer runs (a real hole, not an edge shadow) stay zero. Vectorised per row: the next valid
+    pixel to the right is a reversed running minimum of column indices, the previous one to the
+    left a running maximum.
+    """
+    z = depth.astype(np.float32)
+    H, W = z.shape
+    valid = z > 0
+    cols = np.broadcast_to(np.arange(W), (H, W))
+    nxt = np.where(valid, cols, W)
+    nxt = np.minimum.accumulate(nxt[:, ::-1], axis=1)[:, ::-1]  # next valid column to the right
+    prev = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)  # last valid to the left
+    run = nxt - prev - 1  # length of the zero run each pixel belongs to
+    ok = ~valid & (nxt < W) & (run <= max_edge_run)
+    out = z.copy()
+    rows = np.nonzero(ok)[0]
+    out[ok] = z[rows, nxt[ok]]
+    return out
+
+
+def preprocess_depth(depth: np.ndarray, max_edge_run: int = 12) -> np.ndarray:
+    """Hole filling by reconstruction, then edge zeros from the right (the order of sec. 3, 6.1)."""
+    return fill_edge_zeros(fill_holes(depth), max_edge_run)
+
+
+@dataclass
+class DepthClusters:
+    """Depth layers of one frame.
+
+    Attributes
+    ----------
+    labels : (H, W) int32, layer index (0 = nearest), -1 where there is no depth even after filling
+    centres : (n,) float, layer centres in metres, increasing
+    filled : (H, W) float32, the hole-filled depth that was clustered
+    """
+
+    labels: np.ndarray
+    centres: np.ndarray
+    filled: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.centres)
+
+    def clustered_depth(self) -> np.ndarray:
+        """The depth image with every pixel replaced by its layer centre (paper fig. 2b)."""
+        out = np.zeros(self.labels.shape, np.float32)
+        ok = self.labels >= 0
+        out[ok] = self.centres[self.labels[ok]]
+        return out
+
+
+def assign(depth: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Nearest-centre layer of every pixel (-1 where depth is 0); centres sorted increasing."""
+    edges = 0.5 * (centres[1:] + centres[:-1])
+    labels = np.searchsorted(edges, depth).astype(np.int32)
+    labels[depth <= 0] = -1
+    return labels
+
+
+def cluster_depth(
+    depth: np.ndarray,
+    n_clusters: int | None = None,
+    max_samples: int = 20000,
+    max_edge_run: int = 12,
+    max_clusters: int = 12,
+) -> DepthClusters:
+    """k-means clustering of the (hole-filled) depth into layers (paper A, sec. 3, eq. 1).
+
+    Deterministic: k-means starts from the depth quantiles ``(i + 0.5) / n`` and runs on an
+    evenly strided subsample of at most ``max_samples`` valid pixels; every pixel then takes its
+    nearest centre (in 1-D, a threshold between neighbouring centres).
+
+    Parameters
+    ----------
+    depth : (H, W) float32 metres, 0 = invalid
+    n_clusters : layer count; None = eq. 1 on the filled depth
+    """
+    filled = preprocess_depth(depth, max_edge_run)
+    z = filled[filled > 0]
+    if z.size == 0:
+        return DepthClusters(np.full(depth.shape, -1, np.int32), np.zeros(0), filled)
+    n = n_clusters or cluster_count(filled, max_clusters=max_clusters)
+    sample = np.sort(z[:: max(1, z.size // max_samples)]).astype(float)
+    init = np.quantile(sample, (np.arange(n) + 0.5) / n)
+    n = min(n, np.unique(sample).size)
+    init = np.unique(init)[:n] if np.unique(init).size < n else init
+    centres, _ = kmeans2(sample[:, None], init[:, None], iter=20, minit="matrix", missing="warn")
+    centres = np.unique(np.sort(centres[:, 0]))
+    return DepthClusters(assign(filled, centres), centres, filled)
+
+
+def layer_components(clusters: DepthClusters, edge_tol_m: float = 0.05, edge_tol_rel: float = 0.03):
+    """Connected regions of equal depth layer (8-connectivity), split at depth discontinuities.
+
+    A person and the chair behind them can fall into one layer; a step in depth larger than
+    ``edge_tol_m + edge_tol_rel * z`` between neighbours separates them.
+
+    Returns
+    -------
+    components : (H, W) int32, 0 = none, 1..M region ids
+    areas : (M + 1,) int64 pixel count per id (index 0 unused)
+    """
+    z = clusters.filled
+    step = np.maximum(np.abs(cv2.Sobel(z, cv2.CV_32F, 1, 0, ksize=1)),
+                      np.abs(cv2.Sobel(z, cv2.CV_32F, 0, 1, ksize=1))) * 0.5
+    cut = step > edge_tol_m + edge_tol_rel * z
+    comp = np.zeros(z.shape, np.int32)
+    offset = 0
+    for layer in range(clusters.n):
+        m = ((clusters.labels == layer) & ~cut).astype(np.uint8)
+        n_cc, cc = cv2.connectedComponents(m, connectivity=8)
+        comp[cc > 0] = cc[cc > 0] + offset
+        offset += n_cc - 1
+    return comp, np.bincount(comp.ravel(), minlength=offset + 1)
+
+
+def grow_to_components(seed: np.ndarray, components: np.ndarray, areas: np.ndarray,
+                       min_overlap: float, max_area: float) -> np.ndarray:
+    """Seed pixels plus every region in which at least ``min_overlap`` of the pixels are seeds
+    (regions above ``max_area`` pixels, such as a wall, are never taken whole)."""
+    hit = np.bincount(components[seed], minlength=areas.size)
+    take = (hit >= min_overlap * np.maximum(areas, 1)) & (areas <= max_area)
+    take[0] = False
+    return seed | take[components]

@@ -1,0 +1,298 @@
+"""Paper A's pipeline on one frame pair, and the ``depthcluster`` method for the runner.
+
+For a reference frame A and the current frame B (paper fig. 1):
+
+1. depth layers of A by k-means (:mod:`.clustering`);
+2. pre-removal from the change of depth between A and B (:mod:`.preremoval`);
+3. pose T_B_A by the dense photometric + lambda_I * depth Gauss-Newton (eq. 5) on the static
+   pixels of A (:func:`dynslam_lite.odometry.dense.align` with ``mask_ref``);
+4. background update (:mod:`.background`): residual outliers of the pose leave the static set,
+   the pose is re-estimated from the previous one, ``update_iterations`` times (7 in the paper).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ..evaluation import MaskScores
+from ..geometry import PinholeCamera, warp_coordinates
+from ..odometry.dense import DenseConfig, align
+from .background import OutlierConfig, outliers, residuals
+from .clustering import DepthClusters, cluster_depth, layer_components
+from .preremoval import PreRemoval, PreRemovalConfig, pre_remove
+
+
+@dataclass
+class DepthClusterConfig:
+    """All parameters of paper A, the paper's values as defaults.
+
+    Attributes
+    ----------
+    n_clusters : depth layers; 0 = eq. 1, floor((D_max - D_min) / D_sd)
+    max_clusters : upper clamp of eq. 1 (a few far outliers can inflate D_max)
+    max_edge_run : longest zero run at an edge filled from the right (pixels)
+    preremoval : the block test (sec. 3), see :class:`PreRemovalConfig`
+    use_preremoval : False skips step 2 (ablation)
+    dense : the Gauss-Newton solver of step 3 (lambda_I = ``dense.lambda_depth``)
+    update_iterations : background updates after the first estimate (7 in the paper)
+    refine_levels : pyramid levels of each update, which starts from the previous pose
+        (3 = quarter resolution down to ``dense.finest_level``)
+    outlier : the residual test of step 4, see :class:`OutlierConfig`
+    accumulate : removed pixels stay removed in later iterations (the paper's reading: each
+        iteration "removes part of the moving objects again"); False re-derives them each time
+    stable_fraction : stop early when an update changes fewer than this fraction of the pixels
+        and the pose by less than 0.1 mm / 0.01 deg (the paper sees convergence after ~4); 0 runs
+        all iterations
+    min_static_fraction : fewer static pixels than this (fraction of valid depth) = the update
+        is rejected and the previous estimate kept
+    propagate : the runner carries the moving mask of each pair into the next reference frame
+        as a prior for the first estimate (:func:`propagate_mask`); not in the paper, which treats
+        each pair on its own: a person walking slowly gives the depth test little to see
+    """
+
+    n_clusters: int = 0
+    max_clusters: int = 12
+    max_edge_run: int = 12
+    preremoval: PreRemovalConfig = field(default_factory=PreRemovalConfig)
+    use_preremoval: bool = True
+    dense: DenseConfig = field(default_factory=DenseConfig)
+    update_iterations: int = 7
+    refine_levels: int = 3
+    outlier: OutlierConfig = field(default_factory=OutlierConfig)
+    accumulate: bool = True
+    stable_fraction: float = 0.002
+    min_static_fraction: float = 0.15
+    propagate: bool = True
+
+
+@dataclass
+class Iteration:
+    """One pose estimate of the pair: iteration 0 after pre-removal, then each update.
+
+    Attributes
+    ----------
+    T_cur_ref : (4, 4) pose after this iteration
+    removed : (H, W) bool, reference pixels excluded from this iteration's estimate
+    residual : (H, W) photometric residual of this pose (only when recorded), NaN where undefined
+    tau : photometric outlier threshold derived from this pose's residuals
+    static_fraction : fraction of valid-depth pixels used
+    ok, reason : outcome of the solver
+    """
+
+    T_cur_ref: np.ndarray
+    removed: np.ndarray
+    residual: np.ndarray | None
+    tau: float
+    static_fraction: float
+    ok: bool
+    reason: str = ""
+
+
+@dataclass
+class PairResult:
+    """Paper A on one frame pair.
+
+    Attributes
+    ----------
+    T_cur_ref : final pose estimate; ok/reason: whether it can be trusted
+    clusters : depth layers of the reference frame
+    preremoval : the block test (None when skipped)
+    iterations : every pose estimate, first one first
+    moving : (H, W) bool, final moving-object mask on the reference pixels
+    """
+
+    T_cur_ref: np.ndarray
+    ok: bool
+    reason: str
+    clusters: DepthClusters
+    preremoval: PreRemoval | None
+    iterations: list[Iteration]
+    moving: np.ndarray
+
+
+def estimate_pair(
+    gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, depth_cur: np.ndarray,
+    camera: PinholeCamera, T_init: np.ndarray | None = None, config: DepthClusterConfig | None = None,
+    clusters_ref: DepthClusters | None = None, filled_cur: np.ndarray | None = None,
+    prior: np.ndarray | None = None, record: bool = False, timer=None,
+) -> PairResult:
+    """Run the four steps of paper A on frames A (reference) and B (current).
+
+    Parameters
+    ----------
+    gray_ref, gray_cur : (H, W) float32 intensity in [0, 1]
+    depth_ref, depth_cur : (H, W) float32 metres, 0 = invalid
+    T_init : initial guess of T_cur_ref (identity if None)
+    clusters_ref, filled_cur : reuse layers / hole-filled depth computed earlier (the runner
+        clusters each frame once)
+    prior : (H, W) bool, moving pixels of A predicted from the previous pair (see
+        :func:`propagate_mask`); excluded from the first estimate only, so a wrong prior cannot
+        persist: the updates re-derive the moving pixels from the residuals
+    record : keep the residual image of every iteration (notebooks)
+    timer : optional :class:`dynslam_lite.pipeline.StageTimer`
+    """
+    cfg = config or DepthClusterConfig()
+    stage = timer.stage if timer is not None else _no_stage
+    with stage("cluster"):
+        if clusters_ref is None:
+            clusters_ref = cluster_depth(depth_ref, cfg.n_clusters or None,
+                                         max_edge_run=cfg.max_edge_run, max_clusters=cfg.max_clusters)
+        if filled_cur is None:
+            filled_cur = cluster_depth(depth_cur, cfg.n_clusters or None, max_edge_run=cfg.max_edge_run,
+                                       max_clusters=cfg.max_clusters).filled
+    valid = depth_ref > 0
+    n_valid = max(int(valid.sum()), 1)
+    pre = None
+    removed = np.zeros(depth_ref.shape, bool)
+    if cfg.use_preremoval:
+        with stage("preremove"):
+            pre = pre_remove(clusters_ref, filled_cur, cfg.preremoval)
+            removed = pre.mask.copy()
+    base = removed.copy()
+    if prior is not None:
+        removed |= prior
+    if np.count_nonzero(valid & ~removed) < cfg.min_static_fraction * n_valid:
+        removed = base.copy()  # prior and pre-removal took nearly everything: do not trust them
+    if np.count_nonzero(valid & ~removed) < cfg.min_static_fraction * n_valid:
+        removed[:] = False
+    with stage("align_0"):
+        r = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_init, ~removed, cfg.dense)
+    its: list[Iteration] = []
+    if not r.ok:
+        its.append(Iteration(r.T_cur_ref, removed, None, float("nan"), 0.0, False, r.reason))
+        return PairResult(r.T_cur_ref, False, r.reason, clusters_ref, pre, its, removed)
+    T = r.T_cur_ref
+    refine = dataclasses.replace(cfg.dense, levels=min(cfg.refine_levels, cfg.dense.levels),
+                                 iterations=cfg.dense.iterations[-min(cfg.refine_levels, cfg.dense.levels):])
+    comps = layer_components(clusters_ref) if cfg.outlier.grow else None
+    for k in range(cfg.update_iterations + 1):
+        static_fraction = np.count_nonzero(valid & ~removed) / n_valid
+        if k == cfg.update_iterations and not record:
+            its.append(Iteration(T, removed, None, float("nan"), static_fraction, True))
+            break
+        with stage(f"update_{k + 1}"):
+            r_i, r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T)
+            out, tau = outliers(r_i, r_d, depth_ref, valid & ~removed, cfg.outlier, comps)
+        its.append(Iteration(T, removed, r_i if record else None, tau, static_fraction, True))
+        if k == cfg.update_iterations:
+            break
+        new_removed = ((removed if k else base) | out) if cfg.accumulate else (base | out)
+        if np.count_nonzero(valid & ~new_removed) < cfg.min_static_fraction * n_valid:
+            its[-1].reason = "update rejected: too few static pixels left"
+            break
+        with stage(f"update_{k + 1}"):
+            rr = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, ~new_removed, refine)
+        if not rr.ok:
+            its[-1].reason = f"update rejected: {rr.reason}"
+            break
+        changed = np.count_nonzero(new_removed != removed) / removed.size
+        dT = np.linalg.inv(T) @ rr.T_cur_ref
+        small = np.linalg.norm(dT[:3, 3]) < 1e-4 and np.arccos(np.clip((np.trace(dT[:3, :3]) - 1) / 2, -1, 1)) < np.radians(0.01)
+        T, removed = rr.T_cur_ref, new_removed
+        if cfg.stable_fraction > 0 and changed < cfg.stable_fraction and small:
+            its.append(Iteration(T, removed, None, tau, np.count_nonzero(valid & ~removed) / n_valid,
+                                 True, "converged"))
+            break
+    return PairResult(T, True, "", clusters_ref, pre, its, removed)
+
+
+def propagate_mask(moving: np.ndarray, depth_ref: np.ndarray, camera: PinholeCamera,
+                   T_cur_ref: np.ndarray, close_px: int = 5) -> np.ndarray:
+    """Moving pixels of the reference frame carried into the current frame with the pose.
+
+    Each moving pixel with depth is projected into the current image (nearest pixel); the
+    scattered result is closed morphologically. Objects move a few pixels between frames, so
+    this is a prior for the next pair, not a mask.
+    """
+    mu, mv, _ = warp_coordinates(camera, np.where(moving, depth_ref, 0).astype(np.float32), T_cur_ref)
+    ok = np.isfinite(mu)
+    u = np.rint(mu[ok]).astype(int)
+    v = np.rint(mv[ok]).astype(int)
+    H, W = moving.shape
+    inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    out = np.zeros((H, W), np.uint8)
+    out[v[inside], u[inside]] = 1
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
+    return cv2.dilate(cv2.morphologyEx(out, cv2.MORPH_CLOSE, k), k).astype(bool)
+
+
+class _NullContext:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *a):
+        return False
+
+
+def _no_stage(name):
+    return _NullContext()
+
+
+class DepthClusterMethod:
+    """Method ``depthcluster`` for :func:`dynslam_lite.pipeline.run_method`.
+
+    Clusters every frame once (the current frame's layers are the next pair's reference
+    layers) and, on synthetic sequences, pools the mask scores against the ground truth of the
+    reference frames (:meth:`extras`).
+    """
+
+    name = "depthcluster"
+    config_type = DepthClusterConfig
+
+    def __init__(self, camera: PinholeCamera, config: DepthClusterConfig):
+        self.camera, self.config = camera, config
+        self._cache: tuple[float, DepthClusters] | None = None
+        self._prior: tuple[float, np.ndarray] | None = None
+        self._counts = np.zeros(3, np.int64)  # tp, fp, fn
+        self._pre_counts = np.zeros(3, np.int64)
+        self.iterations_used: list[int] = []
+
+    def _clusters(self, frame) -> DepthClusters:
+        if self._cache is not None and self._cache[0] == frame.timestamp:
+            return self._cache[1]
+        c = cluster_depth(frame.depth, self.config.n_clusters or None,
+                          max_edge_run=self.config.max_edge_run, max_clusters=self.config.max_clusters)
+        self._cache = (frame.timestamp, c)
+        return c
+
+    def track(self, ref, cur, T_init, timer):
+        with timer.stage("cluster"):
+            c_ref = self._clusters(ref)
+            c_cur = self._clusters(cur)
+        prior = None
+        if self._prior is not None and self._prior[0] == ref.timestamp:
+            prior = self._prior[1]
+        res = estimate_pair(ref.gray.astype(np.float32) / 255.0, ref.depth,
+                            cur.gray.astype(np.float32) / 255.0, cur.depth, self.camera, T_init,
+                            self.config, c_ref, c_cur.filled, prior, timer=timer)
+        if self.config.propagate and res.ok:
+            with timer.stage("propagate"):
+                self._prior = (cur.timestamp, propagate_mask(res.moving, ref.depth, self.camera,
+                                                             res.T_cur_ref))
+        self.iterations_used.append(len(res.iterations) - 1)
+        if ref.mask is not None:
+            self._counts += _confusion(res.moving, ref.mask)
+            if res.preremoval is not None:
+                self._pre_counts += _confusion(res.preremoval.mask, ref.mask)
+        return res.T_cur_ref, res.ok, res.reason
+
+    def extras(self) -> dict:
+        out = {"mean_updates": float(np.mean(self.iterations_used)) if self.iterations_used else 0.0}
+        if self._counts.any():
+            out["mask"] = dataclasses.asdict(_scores(self._counts))
+            out["preremoval_mask"] = dataclasses.asdict(_scores(self._pre_counts))
+        return out
+
+
+def _confusion(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    return np.array([np.count_nonzero(pred & truth), np.count_nonzero(pred & ~truth),
+                     np.count_nonzero(~pred & truth)], np.int64)
+
+
+def _scores(c: np.ndarray) -> MaskScores:
+    tp, fp, fn = (int(x) for x in c)
+    return MaskScores(tp / (tp + fp) if tp + fp else 1.0, tp / (tp + fn) if tp + fn else 1.0,
+                      tp / (tp + fp + fn) if tp + fp + fn else 1.0)
