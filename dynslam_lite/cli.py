@@ -4,9 +4,10 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing as mp
+import shutil
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 from .evaluation import evaluate
@@ -75,7 +76,11 @@ def cmd_evaluate(a) -> int:
 
 
 def cmd_bench(a) -> int:
-    """Print ms/frame per stage of the baselines on the same frames, and the generator's rate."""
+    """Print ms/frame per stage of every method on the same frames, and the generator's rate.
+
+    A stage that runs on some frames only (later background updates) is averaged over the
+    frames that ran it; 'frames' says how many.
+    """
     import numpy as np
 
     cache = Path(a.cache)
@@ -89,11 +94,11 @@ def cmd_bench(a) -> int:
         print(f"generator: {a.scene}, {a.frames} frames at 640x480 in {dt:.1f} s = "
               f"{a.frames / dt:.2f} frames/s")
         seq = open_sequence(path.path)
-    print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s}")
+    print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s} {'frames':>7s}")
     for method in a.methods:
         r = run_method(method, seq)
         for stage, ms in r.stage_ms.items():
-            print(f"{method:18s} {stage:10s} {np.mean(ms):9.1f} {np.median(ms):10.1f}")
+            print(f"{method:18s} {stage:10s} {np.mean(ms):9.1f} {np.median(ms):10.1f} {len(ms):7d}")
         s = r.stats()
         print(f"{method:18s} {'total':10s} {s['ms_per_frame']:9.1f} {np.median(r.frame_ms):10.1f}"
               f"   peak memory {s['peak_mem_mib']:.0f} MiB")
@@ -106,6 +111,38 @@ PROFILES = {
     "quick": {"scenes": ("static_xyz", "walking_xyz"), "frames": 45},
     "full": {"scenes": SCENES, "frames": 150},
 }
+
+# The notebooks the reproduction executes (papermill), with their parameters per profile.
+# Paths in parameters are relative to the repository root; output_dir and cache_dir are set by
+# the run.
+NOTEBOOK_RUNS = {
+    "10_depthcluster_clustering_and_masks": {
+        "quick": {"frames": 12, "pair": 6, "eval_frames": 10},
+        "full": {"frames": 150, "pair": 30, "eval_frames": 150},
+    },
+    "11_depthcluster_iterations": {
+        "quick": {"frames": 20, "pair": 6, "map_stride": 5},
+        "full": {"frames": 150, "pair": 30, "map_stride": 10},
+    },
+}
+NOTEBOOK_DIR = Path(__file__).resolve().parents[1] / "notebooks"
+
+
+def _notebook_job(job: tuple) -> tuple[str, float, str]:
+    """Execute one notebook with papermill; returns (name, seconds, error or '')."""
+    name, params, out_dir, cache = job
+    import papermill as pm
+
+    t = time.perf_counter()
+    try:
+        pm.execute_notebook(
+            str(NOTEBOOK_DIR / f"{name}.ipynb"), str(Path(out_dir) / "executed" / f"{name}.ipynb"),
+            parameters={**params, "output_dir": str(out_dir), "cache_dir": str(cache)},
+            cwd=str(NOTEBOOK_DIR.parent), progress_bar=False, kernel_name="python3",
+        )
+        return name, time.perf_counter() - t, ""
+    except Exception as exc:  # reported in the summary; the run fails without touching reports/
+        return name, time.perf_counter() - t, f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else ''}"
 
 
 def _scene_job(job: tuple) -> str:
@@ -171,6 +208,25 @@ def cmd_reproduce(a) -> int:
                   "this machine with other jobs in parallel: varies between runs, unlike the "
                   "error tables. `python -m dynslam_lite bench` measures per stage.",
         )
+        (writer.tmp / "executed").mkdir(exist_ok=True)
+        nb_jobs = [(name, prof_params[a.profile], str(writer.tmp.resolve()), str(cache.resolve()))
+                   for name, prof_params in NOTEBOOK_RUNS.items()]
+        failed = []
+        with ThreadPoolExecutor(max_workers=a.jobs) as threads:  # kernels are processes
+            for name, secs, err in threads.map(_notebook_job, nb_jobs):
+                print(f"[notebook] {name}: {'FAILED ' + err if err else 'ok'} ({secs:.0f} s)", flush=True)
+                if err:
+                    failed.append(name)
+        if failed:
+            keep = Path(a.cache).parent / "failed_notebooks"
+            keep.mkdir(parents=True, exist_ok=True)
+            for name in failed:
+                src = writer.tmp / "executed" / f"{name}.ipynb"
+                if src.exists():
+                    shutil.copy(src, keep / src.name)
+            raise RuntimeError(f"notebook(s) failed: {', '.join(failed)}; reports/ left as it was; "
+                               f"executed copies with the error in {keep}")
+        writer.adopt_all()
         done = writer.commit()
     except BaseException:
         writer.abort()
@@ -239,6 +295,6 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (SequenceError, ValueError, FileNotFoundError, FileExistsError) as exc:
+    except (SequenceError, ValueError, FileNotFoundError, FileExistsError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

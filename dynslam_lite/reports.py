@@ -63,6 +63,14 @@ class ReportWriter:
         self.write_text(rel_stem + ".md", md)
         self.write_text(rel_stem + ".csv", csv_table(header, rows))
 
+    def adopt_all(self) -> None:
+        """Take every file written straight into the temporary folder (figures, notebooks)."""
+        known = set(self.files)
+        for path in sorted(self.tmp.rglob("*")):
+            rel = path.relative_to(self.tmp)
+            if path.is_file() and rel not in known:
+                self.files.append(rel)
+
     def commit(self) -> list[Path]:
         out = []
         for rel in self.files:
