@@ -7,11 +7,24 @@ from dynslam_lite.io import open_sequence
 from dynslam_lite.pipeline import run_method
 
 
-@pytest.mark.parametrize("method", ["static-dense", "opencv-odometry"])
-def test_bonn_crowd_end_to_end(method):
+@pytest.fixture(scope="module")
+def bonn_runs():
     seq = open_sequence(need(BONN_CROWD))
-    r = run_method(method, seq)
-    e = evaluate(seq.groundtruth, r.trajectory)
+    runs = {m: run_method(m, seq) for m in ("static-dense", "opencv-odometry", "depthcluster")}
+    return seq, runs, {m: evaluate(seq.groundtruth, r.trajectory) for m, r in runs.items()}
+
+
+@pytest.mark.parametrize("method", ["static-dense", "opencv-odometry", "depthcluster"])
+def test_bonn_crowd_end_to_end(bonn_runs, method):
+    seq, runs, errors = bonn_runs
+    r, e = runs[method], errors[method]
     assert len(r.trajectory) == len(seq) == 120
     assert e.matched_poses == 120 and e.rpe_trans.count > 0
-    assert 0 < e.ate.rmse < 5.0  # finite, measured; the value is reported by `reproduce --data`
+    assert 0 < e.ate.rmse < 5.0
+
+
+def test_depthcluster_beats_the_static_baselines_on_bonn_crowd(bonn_runs):
+    _, _, errors = bonn_runs
+    dc = errors["depthcluster"].ate.rmse
+    assert dc < 0.5 * errors["static-dense"].ate.rmse, dc
+    assert dc < 0.5 * errors["opencv-odometry"].ate.rmse, dc

@@ -1,0 +1,137 @@
+"""Semantic mask sources: per frame, instance masks of the dynamic classes (people).
+
+Papers B and C take instance masks from a segmentation network (YOLOv5s-seg, Mask R-CNN). Here
+a source is chosen by a spec string (``--masks`` on the command line, ``masks`` in notebooks):
+
+* ``none`` — no masks;
+* ``oracle`` — the synthetic ground-truth masks, split into instances (connected components);
+  ``oracle:degraded`` imitates a real network: dilated or eroded outlines, dropped frames, false
+  blobs (deterministic per seed and frame);
+* ``files:DIR`` — PNG masks computed elsewhere (e.g. YOLOv5-seg or Mask R-CNN run on your
+  machine), one per colour frame, named by its timestamp as in TUM's ``rgb/`` folder
+  (``1311868164.363181.png``; the nearest within 0.02 s is used). 8- or 16-bit, 0 = background,
+  each instance a distinct non-zero value; a 0/255 binary mask is split into connected
+  components. A frame without a file has no masks.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .io import Frame, SequenceError
+
+
+def split_instances(mask: np.ndarray, min_area: int = 50) -> list[np.ndarray]:
+    """Instances of a binary mask: 8-connected components of at least ``min_area`` pixels."""
+    n, cc, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    return [cc == i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area]
+
+
+class NoMasks:
+    name = "none"
+
+    def __call__(self, frame: Frame) -> list[np.ndarray]:
+        return []
+
+
+@dataclass
+class Degradation:
+    """How ``oracle:degraded`` spoils the ground truth, per instance and frame."""
+
+    max_dilate_px: int = 6
+    max_erode_px: int = 4
+    drop_rate: float = 0.1
+    false_blob_rate: float = 0.1
+    seed: int = 0
+
+
+class OracleMasks:
+    """Ground-truth moving-object masks of a synthetic sequence, optionally degraded."""
+
+    def __init__(self, degradation: Degradation | None = None):
+        self.degradation = degradation
+        self.name = "oracle:degraded" if degradation else "oracle"
+
+    def __call__(self, frame: Frame) -> list[np.ndarray]:
+        if frame.mask is None:
+            raise SequenceError("masks 'oracle' need ground-truth masks (masks/ of a synthetic "
+                                f"sequence); frame {frame.index} has none")
+        inst = split_instances(frame.mask)
+        d = self.degradation
+        if d is None:
+            return inst
+        rng = np.random.default_rng([d.seed, frame.index])
+        out = []
+        for m in inst:
+            if rng.random() < d.drop_rate:
+                continue
+            k = int(rng.integers(-d.max_erode_px, d.max_dilate_px + 1))
+            se = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * abs(k) + 1,) * 2)
+            op = cv2.dilate if k > 0 else cv2.erode
+            m = op(m.astype(np.uint8), se).astype(bool) if k else m
+            if m.any():
+                out.append(m)
+        if rng.random() < d.false_blob_rate:
+            H, W = frame.mask.shape
+            blob = np.zeros((H, W), np.uint8)
+            c = (int(rng.integers(0, W)), int(rng.integers(0, H)))
+            cv2.ellipse(blob, c, (int(rng.integers(15, 60)), int(rng.integers(15, 60))), 0, 0, 360, 1, -1)
+            out.append(blob.astype(bool))
+        return out
+
+
+class FileMasks:
+    """Instance masks from PNG files named by timestamp (see the module docstring)."""
+
+    def __init__(self, folder: str | Path, max_dt: float = 0.02):
+        self.folder = Path(folder)
+        self.name = f"files:{folder}"
+        if not self.folder.is_dir():
+            raise SequenceError(f"{self.folder}: mask folder not found")
+        files = sorted(self.folder.glob("*.png"))
+        stamps = []
+        for f in files:
+            try:
+                stamps.append(float(f.stem))
+            except ValueError:
+                raise SequenceError(f"{f}: mask file name is not a timestamp (expected e.g. "
+                                    "1311868164.363181.png)") from None
+        if not files:
+            raise SequenceError(f"{self.folder}: no PNG masks in the folder")
+        order = np.argsort(stamps)
+        self.stamps = np.asarray(stamps)[order]
+        self.files = [files[i] for i in order]
+        self.max_dt = max_dt
+
+    def __call__(self, frame: Frame) -> list[np.ndarray]:
+        j = int(np.argmin(np.abs(self.stamps - frame.timestamp)))
+        if abs(self.stamps[j] - frame.timestamp) > self.max_dt:
+            return []
+        path = self.files[j]
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise SequenceError(f"{path}: unreadable PNG mask")
+        if img.ndim == 3:
+            raise SequenceError(f"{path}: mask must be single-channel (instance ids), got {img.shape[2]} channels")
+        if img.shape != frame.depth.shape:
+            raise SequenceError(f"{path}: mask is {img.shape[1]}x{img.shape[0]}, frame is "
+                                f"{frame.depth.shape[1]}x{frame.depth.shape[0]}")
+        ids = np.unique(img[img > 0])
+        if ids.size == 1 and ids[0] == 255:  # binary: split into components
+            return split_instances(img > 0)
+        return [img == i for i in ids]
+
+
+def make_mask_source(spec: str):
+    """A mask source from its spec: ``none``, ``oracle``, ``oracle:degraded``, ``files:DIR``."""
+    kind, _, arg = spec.partition(":")
+    if kind == "none" and not arg:
+        return NoMasks()
+    if kind == "oracle" and arg in ("", "degraded"):
+        return OracleMasks(Degradation() if arg else None)
+    if kind == "files" and arg:
+        return FileMasks(arg)
+    raise ValueError(f"unknown mask source {spec!r}: use none, oracle, oracle:degraded or files:DIR")
