@@ -127,3 +127,16 @@ def test_depthcluster_beats_static_dense_on_walking_clip(scene):
     assert e_dc < e_st / 3, (e_dc, e_st)
     assert dc.extras["mask"]["recall"] > 0.6
     assert {"cluster", "preremove", "align_0", "update_1"} <= set(dc.stage_ms)
+
+
+def test_depthcluster_deterministic_and_reports_failure(scene):
+    seq = open_sequence(scene("walking_xyz", 150), start=0, count=8)
+    a = run_method("depthcluster", seq)
+    b = run_method("depthcluster", seq)
+    assert np.array_equal(a.trajectory.poses, b.trajectory.poses)
+    assert a.extras == b.extras
+    # a current frame without depth cannot be tracked: reported, not raised
+    g = seq[0].gray.astype(np.float32) / 255
+    res = estimate_pair(g, seq[0].depth, g, np.zeros_like(seq[0].depth), seq.camera,
+                        T_init=se3_exp([0, 0, 0, 0, 3.0, 0]))
+    assert not res.ok and res.reason
