@@ -147,10 +147,18 @@ class MaskScores:
         t = np.asarray(truth, bool)
         if p.shape != t.shape:
             raise ValueError(f"mask shapes differ: {p.shape} vs {t.shape}")
-        tp = np.count_nonzero(p & t)
-        fp = np.count_nonzero(p & ~t)
-        fn = np.count_nonzero(~p & t)
+        return cls.from_counts(*confusion(p, t))
+
+    @classmethod
+    def from_counts(cls, tp: int, fp: int, fn: int) -> "MaskScores":
+        """Scores from pixel counts (true positives, false positives, false negatives)."""
         precision = tp / (tp + fp) if tp + fp else 1.0
         recall = tp / (tp + fn) if tp + fn else 1.0
         iou = tp / (tp + fp + fn) if tp + fp + fn else 1.0
         return cls(float(precision), float(recall), float(iou))
+
+
+def confusion(predicted: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(3,) int64 pixel counts: true positives, false positives, false negatives."""
+    p, t = np.asarray(predicted, bool), np.asarray(truth, bool)
+    return np.array([np.count_nonzero(p & t), np.count_nonzero(p & ~t), np.count_nonzero(~p & t)], np.int64)

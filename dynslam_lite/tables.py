@@ -21,6 +21,11 @@ def _real(results: list[dict]) -> list[str]:
     return sorted({r["sequence"] for r in results if r["sequence"].startswith("real/")})
 
 
+def _real_head(idx, seq: str, methods) -> list:
+    """First cells of a real-data row: folder name, where measured, frames."""
+    return [seq.split("/", 1)[1], seq, _frames(idx, seq, methods)]
+
+
 def _frames(idx, seq: str, methods) -> str:
     n = {idx[(seq, m)]["frames"] for m in methods if (seq, m) in idx}
     return "/".join(str(x) for x in sorted(n)) or "-"
@@ -63,7 +68,7 @@ def paper_a_table1(results: list[dict]) -> Table:
             + list(rot) + [_get(idx, seq, m, "rpe_rot_deg_per_s", "rmse") for m in ms]
         )
     for seq in _real(results):
-        rows.append([seq.split("/", 1)[1], seq, _frames(idx, seq, ms)]
+        rows.append(_real_head(idx, seq, ms)
                     + ["-"] * 4 + [_get(idx, seq, m, "rpe_trans_m_per_s", "rmse") for m in ms]
                     + ["-"] * 4 + [_get(idx, seq, m, "rpe_rot_deg_per_s", "rmse") for m in ms])
     notes = ("Published columns: the numbers printed in paper A (TUM sequences, full length). "
@@ -89,7 +94,7 @@ def paper_a_table2(results: list[dict]) -> Table:
                     + [" / ".join(f"{v:.4f}" for v in p) for p in pub]
                     + [_triple(idx, seq, m) for m in ms])
     for seq in _real(results):
-        rows.append([seq.split("/", 1)[1], seq, _frames(idx, seq, ms)] + ["-"] * 3
+        rows.append(_real_head(idx, seq, ms) + ["-"] * 3
                     + [_triple(idx, seq, m) for m in ms])
     notes = ("ATE after SE(3) alignment (evo, 0.02 s association), metres. Published: paper A's "
              "Table 2 (ORB-SLAM2 and ref. [5] as printed there). Measured: this project on the data "

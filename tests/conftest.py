@@ -13,6 +13,20 @@ BONN_CROWD = SHARED_DATA / "rgbd_bonn_crowd_dev"
 FR1_GT = SHARED_DATA / "groundtruth_only" / "rgbd_dataset_freiburg1_xyz" / "groundtruth.txt"
 
 
+def render_clean(renderer, T_w_c, s=None):
+    """Noise-free (gray [0, 1], depth m with 0 = none, moving mask) of a SceneRenderer's scene
+    seen from ``T_w_c``; people posed at time ``s``, none when ``s`` is None."""
+    import numpy as np
+    from dynslam_lite.synth.generator import LIGHT_W
+    from dynslam_lite.synth.raycast import render
+
+    r = renderer
+    groups = [p.boxes(s) for p in r.people] if s is not None else []
+    rgb, depth, dyn, _ = render(r.camera, T_w_c, r.static, groups, r.textures, LIGHT_W, r.rays)
+    gray = (rgb @ np.array([0.299, 0.587, 0.114], np.float32)).astype(np.float32)
+    return gray, np.where(np.isfinite(depth), depth, 0).astype(np.float32), dyn
+
+
 def need(path: Path):
     if not path.exists():
         pytest.skip(f"real data not available: {path} (the shared data folder beside the project)")

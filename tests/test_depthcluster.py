@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from conftest import render_clean
 from dynslam_lite.depthcluster import (DepthClusterConfig, OutlierConfig, cluster_count, cluster_depth,
                                        estimate_pair, fill_edge_zeros, fill_holes, outliers, pre_remove)
 from dynslam_lite.evaluation import MaskScores, evaluate
@@ -10,8 +11,6 @@ from dynslam_lite.io import open_sequence
 from dynslam_lite.odometry import DenseConfig, align
 from dynslam_lite.pipeline import run_method
 from dynslam_lite.synth import SceneRenderer
-from dynslam_lite.synth.generator import LIGHT_W
-from dynslam_lite.synth.raycast import render
 
 
 def _layers(shape=(120, 160)):
@@ -92,20 +91,13 @@ def test_outliers_flag_a_residual_block_and_grow_nothing_else():
     assert s.recall > 0.98 and s.precision > 0.98, s
 
 
-def _clean(r, T_w_c, s, people=True):
-    groups = [p.boxes(s) for p in r.people] if people else []
-    rgb, depth, dyn, _ = render(r.camera, T_w_c, r.static, groups, r.textures, LIGHT_W, r.rays)
-    gray = (rgb @ np.array([0.299, 0.587, 0.114], np.float32)).astype(np.float32)
-    return gray, np.where(np.isfinite(depth), depth, 0).astype(np.float32), dyn
-
-
 @pytest.mark.parametrize("s", [0.8, 1.5])  # a person walks through the middle of the view
 def test_pair_recovers_known_pose_with_a_walking_person(s):
     r = SceneRenderer("walking_xyz", 0)
     T_w_ref = r.pose(s)
     T_cur_ref = se3_exp([0.01, -0.005, 0.01, 0.004, -0.006, 0.002])
-    g0, d0, dyn0 = _clean(r, T_w_ref, s)
-    g1, d1, _ = _clean(r, T_w_ref @ invert(T_cur_ref), s + 1 / 30)
+    g0, d0, dyn0 = render_clean(r, T_w_ref, s)
+    g1, d1, _ = render_clean(r, T_w_ref @ invert(T_cur_ref), s + 1 / 30)
     assert dyn0.mean() > 0.05
     cfg = DepthClusterConfig(dense=DenseConfig(finest_level=0))
     res = estimate_pair(g0, d0, g1, d1, r.camera, config=cfg, record=True)

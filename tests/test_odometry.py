@@ -1,21 +1,17 @@
 import numpy as np
 import pytest
 
-from conftest import FR2_DESK, need
+from conftest import FR2_DESK, need, render_clean
 from dynslam_lite.evaluation import evaluate
 from dynslam_lite.geometry import invert, se3_exp, se3_log
 from dynslam_lite.io import open_sequence
 from dynslam_lite.odometry import DenseConfig, OpenCVOdometry, align
 from dynslam_lite.pipeline import run_method
 from dynslam_lite.synth import SceneRenderer
-from dynslam_lite.synth.generator import LIGHT_W
-from dynslam_lite.synth.raycast import render
 
 
 def _clean_frame(r, T_w_c):
-    rgb, depth, _, _ = render(r.camera, T_w_c, r.static, [], r.textures, LIGHT_W, r.rays)
-    gray = rgb @ np.array([0.299, 0.587, 0.114], np.float32)
-    return gray.astype(np.float32), np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+    return render_clean(r, T_w_c)[:2]
 
 
 @pytest.mark.parametrize("xi", [

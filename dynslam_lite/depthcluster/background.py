@@ -64,7 +64,8 @@ def residuals(
     return r_i.astype(np.float32), r_d
 
 
-def _disk(r: int) -> np.ndarray:
+def disk(r: int) -> np.ndarray:
+    """Elliptic structuring element of radius ``r`` pixels."""
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
 
 
@@ -105,5 +106,5 @@ def outliers(
         comp, areas = components
         m = grow_to_components(m, comp, areas, cfg.grow_min_overlap, cfg.grow_max_area_fraction * m.size)
     if cfg.dilate_px:
-        m = cv2.dilate(m.astype(np.uint8), _disk(cfg.dilate_px)).astype(bool)
+        m = cv2.dilate(m.astype(np.uint8), disk(cfg.dilate_px)).astype(bool)
     return m, tau

@@ -159,9 +159,7 @@ def cluster_depth(
         return DepthClusters(np.full(depth.shape, -1, np.int32), np.zeros(0), filled)
     n = n_clusters or cluster_count(filled, max_clusters=max_clusters)
     sample = np.sort(z[:: max(1, z.size // max_samples)]).astype(float)
-    init = np.quantile(sample, (np.arange(n) + 0.5) / n)
-    n = min(n, np.unique(sample).size)
-    init = np.unique(init)[:n] if np.unique(init).size < n else init
+    init = np.unique(np.quantile(sample, (np.arange(n) + 0.5) / n))  # tied quantiles collapse
     centres, _ = kmeans2(sample[:, None], init[:, None], iter=20, minit="matrix", missing="warn")
     centres = np.unique(np.sort(centres[:, 0]))
     return DepthClusters(assign(filled, centres), centres, filled)

@@ -12,15 +12,16 @@ For a reference frame A and the current frame B (paper fig. 1):
 from __future__ import annotations
 
 import dataclasses
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from ..evaluation import MaskScores
-from ..geometry import PinholeCamera, warp_coordinates
+from ..evaluation import MaskScores, confusion
+from ..geometry import PinholeCamera, rotation_angle_deg, warp_coordinates
 from ..odometry.dense import DenseConfig, align
-from .background import OutlierConfig, outliers, residuals
+from .background import OutlierConfig, disk, outliers, residuals
 from .clustering import DepthClusters, cluster_depth, layer_components
 from .preremoval import PreRemoval, PreRemovalConfig, pre_remove
 
@@ -113,6 +114,11 @@ class PairResult:
     moving: np.ndarray
 
 
+def _layers(depth: np.ndarray, cfg: DepthClusterConfig) -> DepthClusters:
+    return cluster_depth(depth, cfg.n_clusters or None, max_edge_run=cfg.max_edge_run,
+                         max_clusters=cfg.max_clusters)
+
+
 def estimate_pair(
     gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, depth_cur: np.ndarray,
     camera: PinholeCamera, T_init: np.ndarray | None = None, config: DepthClusterConfig | None = None,
@@ -135,16 +141,18 @@ def estimate_pair(
     timer : optional :class:`dynslam_lite.pipeline.StageTimer`
     """
     cfg = config or DepthClusterConfig()
-    stage = timer.stage if timer is not None else _no_stage
+    stage = timer.stage if timer is not None else (lambda name: nullcontext())
     with stage("cluster"):
         if clusters_ref is None:
-            clusters_ref = cluster_depth(depth_ref, cfg.n_clusters or None,
-                                         max_edge_run=cfg.max_edge_run, max_clusters=cfg.max_clusters)
+            clusters_ref = _layers(depth_ref, cfg)
         if filled_cur is None:
-            filled_cur = cluster_depth(depth_cur, cfg.n_clusters or None, max_edge_run=cfg.max_edge_run,
-                                       max_clusters=cfg.max_clusters).filled
+            filled_cur = _layers(depth_cur, cfg).filled
     valid = depth_ref > 0
     n_valid = max(int(valid.sum()), 1)
+
+    def static_fraction(removed: np.ndarray) -> float:
+        return np.count_nonzero(valid & ~removed) / n_valid
+
     pre = None
     removed = np.zeros(depth_ref.shape, bool)
     if cfg.use_preremoval:
@@ -154,9 +162,9 @@ def estimate_pair(
     base = removed.copy()
     if prior is not None:
         removed |= prior
-    if np.count_nonzero(valid & ~removed) < cfg.min_static_fraction * n_valid:
+    if static_fraction(removed) < cfg.min_static_fraction:
         removed = base.copy()  # prior and pre-removal took nearly everything: do not trust them
-    if np.count_nonzero(valid & ~removed) < cfg.min_static_fraction * n_valid:
+    if static_fraction(removed) < cfg.min_static_fraction:
         removed[:] = False
     with stage("align_0"):
         r = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_init, ~removed, cfg.dense)
@@ -169,18 +177,17 @@ def estimate_pair(
                                  iterations=cfg.dense.iterations[-min(cfg.refine_levels, cfg.dense.levels):])
     comps = layer_components(clusters_ref) if cfg.outlier.grow else None
     for k in range(cfg.update_iterations + 1):
-        static_fraction = np.count_nonzero(valid & ~removed) / n_valid
         if k == cfg.update_iterations and not record:
-            its.append(Iteration(T, removed, None, float("nan"), static_fraction, True))
+            its.append(Iteration(T, removed, None, float("nan"), static_fraction(removed), True))
             break
         with stage(f"update_{k + 1}"):
             r_i, r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T)
             out, tau = outliers(r_i, r_d, depth_ref, valid & ~removed, cfg.outlier, comps)
-        its.append(Iteration(T, removed, r_i if record else None, tau, static_fraction, True))
+        its.append(Iteration(T, removed, r_i if record else None, tau, static_fraction(removed), True))
         if k == cfg.update_iterations:
             break
         new_removed = ((removed if k else base) | out) if cfg.accumulate else (base | out)
-        if np.count_nonzero(valid & ~new_removed) < cfg.min_static_fraction * n_valid:
+        if static_fraction(new_removed) < cfg.min_static_fraction:
             its[-1].reason = "update rejected: too few static pixels left"
             break
         with stage(f"update_{k + 1}"):
@@ -190,11 +197,10 @@ def estimate_pair(
             break
         changed = np.count_nonzero(new_removed != removed) / removed.size
         dT = np.linalg.inv(T) @ rr.T_cur_ref
-        small = np.linalg.norm(dT[:3, 3]) < 1e-4 and np.arccos(np.clip((np.trace(dT[:3, :3]) - 1) / 2, -1, 1)) < np.radians(0.01)
+        small = np.linalg.norm(dT[:3, 3]) < 1e-4 and rotation_angle_deg(dT[:3, :3]) < 0.01
         T, removed = rr.T_cur_ref, new_removed
         if cfg.stable_fraction > 0 and changed < cfg.stable_fraction and small:
-            its.append(Iteration(T, removed, None, tau, np.count_nonzero(valid & ~removed) / n_valid,
-                                 True, "converged"))
+            its.append(Iteration(T, removed, None, tau, static_fraction(removed), True, "converged"))
             break
     return PairResult(T, True, "", clusters_ref, pre, its, removed)
 
@@ -215,20 +221,8 @@ def propagate_mask(moving: np.ndarray, depth_ref: np.ndarray, camera: PinholeCam
     inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
     out = np.zeros((H, W), np.uint8)
     out[v[inside], u[inside]] = 1
-    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
+    k = disk(close_px)
     return cv2.dilate(cv2.morphologyEx(out, cv2.MORPH_CLOSE, k), k).astype(bool)
-
-
-class _NullContext:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *a):
-        return False
-
-
-def _no_stage(name):
-    return _NullContext()
 
 
 class DepthClusterMethod:
@@ -253,8 +247,7 @@ class DepthClusterMethod:
     def _clusters(self, frame) -> DepthClusters:
         if self._cache is not None and self._cache[0] == frame.timestamp:
             return self._cache[1]
-        c = cluster_depth(frame.depth, self.config.n_clusters or None,
-                          max_edge_run=self.config.max_edge_run, max_clusters=self.config.max_clusters)
+        c = _layers(frame.depth, self.config)
         self._cache = (frame.timestamp, c)
         return c
 
@@ -274,25 +267,15 @@ class DepthClusterMethod:
                                                              res.T_cur_ref))
         self.iterations_used.append(len(res.iterations) - 1)
         if ref.mask is not None:
-            self._counts += _confusion(res.moving, ref.mask)
+            self._counts += confusion(res.moving, ref.mask)
             if res.preremoval is not None:
-                self._pre_counts += _confusion(res.preremoval.mask, ref.mask)
+                self._pre_counts += confusion(res.preremoval.mask, ref.mask)
         return res.T_cur_ref, res.ok, res.reason
 
     def extras(self) -> dict:
         out = {"mean_updates": float(np.mean(self.iterations_used)) if self.iterations_used else 0.0}
         if self._counts.any():
-            out["mask"] = dataclasses.asdict(_scores(self._counts))
-            out["preremoval_mask"] = dataclasses.asdict(_scores(self._pre_counts))
+            out["mask"] = dataclasses.asdict(MaskScores.from_counts(*map(int, self._counts)))
+            out["preremoval_mask"] = dataclasses.asdict(MaskScores.from_counts(*map(int, self._pre_counts)))
         return out
 
-
-def _confusion(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    return np.array([np.count_nonzero(pred & truth), np.count_nonzero(pred & ~truth),
-                     np.count_nonzero(~pred & truth)], np.int64)
-
-
-def _scores(c: np.ndarray) -> MaskScores:
-    tp, fp, fn = (int(x) for x in c)
-    return MaskScores(tp / (tp + fp) if tp + fp else 1.0, tp / (tp + fn) if tp + fn else 1.0,
-                      tp / (tp + fp + fn) if tp + fp + fn else 1.0)
