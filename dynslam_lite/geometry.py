@@ -27,13 +27,17 @@ def hat(w: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    w : (3,) float
+    w : (3,) or (N, 3) float
     Returns
     -------
-    (3, 3) float
+    (3, 3) or (N, 3, 3) float
     """
     w = np.asarray(w, dtype=float)
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    H = np.zeros(w.shape + (3,))
+    H[..., 0, 1], H[..., 0, 2] = -w[..., 2], w[..., 1]
+    H[..., 1, 0], H[..., 1, 2] = w[..., 2], -w[..., 0]
+    H[..., 2, 0], H[..., 2, 1] = -w[..., 1], w[..., 0]
+    return H
 
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
@@ -107,6 +111,19 @@ def invert(T: np.ndarray) -> np.ndarray:
     Ti[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, t)
     Ti[..., 3, 3] = 1.0
     return Ti
+
+
+def normalize_pose(T: np.ndarray) -> np.ndarray:
+    """Nearest rigid transform: the rotation block projected onto SO(3) (SVD).
+
+    Products of many poses lose orthonormality by rounding; an algorithm that chains poses
+    (motion models) calls this to keep ``invert`` exact.
+    """
+    U, _, Vt = np.linalg.svd(T[:3, :3])
+    out = np.array(T, dtype=float)
+    out[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    out[3] = (0.0, 0.0, 0.0, 1.0)
+    return out
 
 
 def compose(*Ts: np.ndarray) -> np.ndarray:
@@ -330,3 +347,20 @@ def depth_pyramid(depth: np.ndarray, levels: int) -> list[np.ndarray]:
         with np.errstate(divide="ignore", invalid="ignore"):
             pyr.append(np.where(valid > 0, total / np.maximum(valid, 1), 0.0).astype(np.float32))
     return pyr
+
+
+# --------------------------------------------------------------------------- epipolar geometry
+
+
+def fundamental_from_pose(camera: PinholeCamera, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(3, 3) F with ``p_cur^T F p_ref = 0`` for ``T_cur_ref = [R | t]``: K^-T [t]x R K^-1."""
+    Kinv = np.linalg.inv(camera.K)
+    return Kinv.T @ hat(t) @ R @ Kinv
+
+
+def epipolar_distance(F: np.ndarray, uv_ref: np.ndarray, uv_cur: np.ndarray) -> np.ndarray:
+    """(N,) pixel distance of p_cur from its epipolar line F p_ref (paper C, eq. 3)."""
+    p1 = np.column_stack([uv_ref, np.ones(len(uv_ref))])
+    p2 = np.column_stack([uv_cur, np.ones(len(uv_cur))])
+    line = p1 @ F.T  # (A, B, C) per point
+    return np.abs(np.sum(p2 * line, axis=1)) / np.maximum(np.hypot(line[:, 0], line[:, 1]), 1e-12)

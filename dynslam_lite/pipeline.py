@@ -20,6 +20,9 @@ import numpy as np
 from .geometry import invert
 from .io import Frame, RGBDSequence, Trajectory
 from .depthcluster import DepthClusterMethod
+from .features.method import StaticORBMethod
+from .masks import make_mask_source
+from .weightedstatic import WeightedStaticMethod
 from .odometry.dense import DenseConfig, align
 from .odometry.opencv_odometry import OpenCVOdometry, OpenCVOdometryConfig
 
@@ -113,7 +116,10 @@ class OpenCVMethod:
         return T, ok, "" if ok else "cv2.Odometry.compute returned False"
 
 
-METHODS: dict[str, type] = {m.name: m for m in (StaticDense, OpenCVMethod, DepthClusterMethod)}
+METHODS: dict[str, type] = {
+    m.name: m for m in (StaticDense, OpenCVMethod, DepthClusterMethod, StaticORBMethod,
+                        WeightedStaticMethod)
+}
 
 
 def parse_value(text: str) -> Any:
@@ -159,6 +165,7 @@ def run_method(
     seq: RGBDSequence,
     params: dict[str, Any] | None = None,
     progress: bool = False,
+    masks: str = "none",
     on_frame: Callable[[int], None] | None = None,
 ) -> RunResult:
     """Run ``method`` over every frame of ``seq``.
@@ -169,6 +176,7 @@ def run_method(
     seq : the sequence (or window) to track
     params : overrides of the method's config fields
     progress : show a tqdm progress bar
+    masks : semantic mask source for methods that use one (see :mod:`dynslam_lite.masks`)
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}: choose one of {', '.join(sorted(METHODS))}")
@@ -176,7 +184,12 @@ def run_method(
         raise ValueError(f"{seq.root}: empty sequence, nothing to track")
     cls = METHODS[method]
     config = make_config(cls.config_type, params)
-    tracker = cls(seq.camera, config)
+    if getattr(cls, "uses_masks", False):
+        tracker = cls(seq.camera, config, make_mask_source(masks))
+    elif masks != "none":
+        raise ValueError(f"method {method!r} does not use semantic masks (got --masks {masks})")
+    else:
+        tracker = cls(seq.camera, config)
     poses = [np.eye(4)]
     failed: list[tuple[int, str]] = []
     stage_ms: dict[str, list[float]] = defaultdict(list)
@@ -206,9 +219,12 @@ def run_method(
             stage_ms[k].append(v)
         if on_frame:
             on_frame(i)
+    if hasattr(tracker, "trajectory"):  # keyframe-based: final poses after bundle adjustment
+        poses = list(tracker.trajectory())
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
     extras = tracker.extras() if hasattr(tracker, "extras") else {}
     return RunResult(
         method, Trajectory(seq.timestamps.copy(), np.stack(poses)), failed, dict(stage_ms),
-        frame_ms, peak, dataclasses.asdict(config), extras,
+        frame_ms, peak, {**dataclasses.asdict(config), **({"masks": masks} if masks != "none" else {})},
+        extras,
     )

@@ -1,0 +1,377 @@
+"""An ORB-SLAM2-style RGB-D tracking frontend, lite: the shared base of papers B and C.
+
+Per frame (ORB-SLAM2's Tracking thread, without loop closing or relocalisation database):
+
+1. ORB keypoints spread over the image, with depth (:mod:`.orb`); keypoints inside the
+   semantic masks are dropped when a method asks for it;
+2. pose prediction by the constant-velocity motion model;
+3. search by projection of the local map (the points of the latest keyframes) in a window
+   around the predicted position, then pose-only optimisation with outlier rounds; a second,
+   narrow search with the optimised pose adds matches and the pose is optimised again. When the
+   window search finds too few matches, descriptor matching against the local map and PnP with
+   RANSAC (``cv2.solvePnPRansac``) re-initialise the pose;
+4. keyframe decision (tracked points below 90 % of the last keyframe's, or a maximum gap);
+   a keyframe creates map points from its unmatched keypoints with depth and runs local bundle
+   adjustment over a window of keyframes; points found in too few of the frames where they
+   were visible are culled.
+
+The frame poses are kept relative to their reference keyframe and composed with the final
+keyframe poses at the end (:meth:`FeatureTracker.trajectory`), as ORB-SLAM2 writes its
+trajectory.
+
+Dynamic methods change step 3 through :meth:`FeatureTracker.estimate` (paper B) or the images
+(paper C).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ..geometry import PinholeCamera, backproject, invert, normalize_pose, transform_points
+from .matching import match_descriptors, search_by_projection
+from .optimize import Observations, local_bundle_adjustment, optimize_pose
+from .orb import Features, ORBConfig, extract
+
+
+@dataclass
+class FrontendConfig:
+    """Parameters of the frontend (ORB-SLAM2's RGB-D TUM settings where they exist).
+
+    Attributes
+    ----------
+    orb : keypoint extraction, see :class:`ORBConfig`
+    baseline_m : virtual stereo baseline of the RGB-D error (b_f = fx * baseline; 40 / fx in
+        ORB-SLAM2's TUM files, i.e. 0.075-0.08 m)
+    search_radius_px : window of the first search by projection (octave 0)
+    refine_radius_px : window of the second search, with the optimised pose
+    max_descriptor_distance : Hamming distance accepted in the searches
+    min_inliers : fewer inlier matches = tracking failure on this frame
+    keyframe_ratio : new keyframe when the inliers drop below this fraction of the last
+        keyframe's tracked points
+    keyframe_max_gap : ... or after this many frames without one
+    max_point_depth_m : map points are created from keypoints closer than this (ORB-SLAM2's
+        ThDepth = 40 baselines = 3.2 m)
+    local_map_keyframes : the local map holds the points of this many latest keyframes
+    ba_window : keyframes optimised by local bundle adjustment (older observers held fixed);
+        0 = no local BA
+    ba_max_nfev : function evaluations of each local BA
+    cull_ratio, cull_min_visible : a point found in fewer than ``cull_ratio`` of the frames
+        where it was visible (after ``cull_min_visible`` of them) is removed
+    """
+
+    orb: ORBConfig = field(default_factory=ORBConfig)
+    baseline_m: float = 0.08
+    search_radius_px: float = 15.0
+    refine_radius_px: float = 4.0
+    max_descriptor_distance: int = 80
+    min_inliers: int = 20
+    keyframe_ratio: float = 0.9
+    keyframe_max_gap: int = 10
+    max_point_depth_m: float = 4.0
+    local_map_keyframes: int = 8
+    ba_window: int = 5
+    ba_max_nfev: int = 8
+    cull_ratio: float = 0.25
+    cull_min_visible: int = 4
+
+
+class PointMap:
+    """Map points: world positions, descriptors and visibility counts.
+
+    Attributes
+    ----------
+    P_w : (M, 3) float, world frame, metres
+    desc : (M, 32) uint8, descriptor of the creating keypoint
+    visible, found : (M,) int, frames where the point projected into the image / was matched
+    alive : (M,) bool
+    """
+
+    def __init__(self):
+        self.P_w = np.zeros((0, 3))
+        self.desc = np.zeros((0, 32), np.uint8)
+        self.visible = np.zeros(0, int)
+        self.found = np.zeros(0, int)
+        self.alive = np.zeros(0, bool)
+
+    def __len__(self) -> int:
+        return len(self.P_w)
+
+    def add(self, P_w: np.ndarray, desc: np.ndarray) -> np.ndarray:
+        ids = np.arange(len(self), len(self) + len(P_w))
+        self.P_w = np.vstack([self.P_w, P_w])
+        self.desc = np.vstack([self.desc, desc])
+        self.visible = np.concatenate([self.visible, np.ones(len(P_w), int)])
+        self.found = np.concatenate([self.found, np.ones(len(P_w), int)])
+        self.alive = np.concatenate([self.alive, np.ones(len(P_w), bool)])
+        return ids
+
+
+@dataclass
+class Keyframe:
+    """A keyframe: its pose, keypoints and the map point each keypoint observes.
+
+    Attributes
+    ----------
+    frame : index of the frame in the sequence
+    T_c_w : (4, 4) world to camera
+    feats : keypoints
+    point_ids : (N,) int, map point observed by each keypoint, -1 = none
+    weights : (N,) float, static weight of each observation (1 without weighting)
+    """
+
+    frame: int
+    T_c_w: np.ndarray
+    feats: Features
+    point_ids: np.ndarray
+    weights: np.ndarray
+
+
+@dataclass
+class Estimate:
+    """What the pose step of a frame returns.
+
+    Attributes
+    ----------
+    T_c_w : (4, 4) world to camera
+    inliers : (K,) bool per match
+    weights : (K,) float per match, static weight (1 = fully trusted)
+    dynamic : (N,) bool per keypoint of the frame, judged moving (never becomes a map point)
+    info : anything a method wants to keep for inspection (notebooks)
+    """
+
+    T_c_w: np.ndarray
+    inliers: np.ndarray
+    weights: np.ndarray
+    dynamic: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class TrackedFrame:
+    """One frame's tracking: keypoints, matches to map points and the estimate."""
+
+    index: int
+    feats: Features
+    map_idx: np.ndarray
+    kp_idx: np.ndarray
+    estimate: Estimate | None
+    ok: bool
+    reason: str = ""
+    keyframe: bool = False
+
+
+class FeatureTracker:
+    """The frontend. ``process(frame)`` tracks one frame; ``trajectory()`` gives all poses."""
+
+    def __init__(self, camera: PinholeCamera, config: FrontendConfig | None = None):
+        self.camera = camera
+        self.config = cfg = config or FrontendConfig()
+        self.bf = camera.fx * cfg.baseline_m
+        self.map = PointMap()
+        self.keyframes: list[Keyframe] = []
+        self.frame_ref: list[tuple[int, np.ndarray]] = []  # (keyframe id, T_c_kf) per frame
+        self.T_last: np.ndarray | None = None
+        self.T_before: np.ndarray | None = None
+        self.last_tracked = 0
+        self.frames_since_kf = 0
+
+    # ------------------------------------------------------------------ per frame
+    def process(self, frame, exclude: np.ndarray | None = None, timer=None) -> TrackedFrame:
+        """Track one frame (a :class:`dynslam_lite.io.Frame`); failures are reported, not raised.
+
+        ``exclude``: (H, W) bool, keypoints inside are dropped (semantic masks).
+        """
+        from contextlib import nullcontext
+
+        stage = timer.stage if timer else (lambda name: nullcontext())
+        with stage("orb"):
+            feats = extract(frame.gray, frame.depth, self.config.orb, exclude)
+        if not self.keyframes:
+            self._add_keyframe(frame.index, np.eye(4), feats, np.zeros(0, int), np.zeros(0, int),
+                               np.ones(0), np.zeros(len(feats), bool))
+            self._record(np.eye(4))
+            return TrackedFrame(frame.index, feats, np.zeros(0, int), np.zeros(0, int), None, True,
+                                keyframe=True)
+        T_pred = self._predict()
+        with stage("match"):
+            local = self._local_points()
+            mi, ki, T_pred = self._search(local, feats, T_pred, self.config.search_radius_px, True)
+        if len(mi) < self.config.min_inliers:
+            self._record(T_pred)
+            return TrackedFrame(frame.index, feats, mi, ki, None, False,
+                                f"{len(mi)} matches to the local map (need {self.config.min_inliers})")
+        with stage("pose"):
+            est = self.estimate(frame, feats, mi, ki, T_pred)
+        with stage("match"):
+            mi, ki, _ = self._search(local, feats, est.T_c_w, self.config.refine_radius_px, False)
+        with stage("pose"):
+            est = self.estimate(frame, feats, mi, ki, est.T_c_w)
+        n_in = int(est.inliers.sum())
+        if n_in < self.config.min_inliers:
+            self._record(T_pred)
+            return TrackedFrame(frame.index, feats, mi, ki, est, False,
+                                f"{n_in} inlier matches (need {self.config.min_inliers})")
+        self.map.found[mi[est.inliers]] += 1
+        self.frames_since_kf += 1
+        is_kf = (n_in < self.config.keyframe_ratio * self.last_tracked
+                 or self.frames_since_kf >= self.config.keyframe_max_gap)
+        if is_kf:
+            with stage("keyframe"):
+                self._add_keyframe(frame.index, est.T_c_w, feats, mi, ki, est.weights * est.inliers,
+                                   est.dynamic)
+                self.last_tracked = n_in
+            with stage("local_ba"):
+                self._local_ba()
+            T = self.keyframes[-1].T_c_w
+        else:
+            T = est.T_c_w
+        self._record(T)
+        return TrackedFrame(frame.index, feats, mi, ki, est, True, keyframe=is_kf)
+
+    def estimate(self, frame, feats: Features, map_idx: np.ndarray, kp_idx: np.ndarray,
+                 T_init: np.ndarray) -> Estimate:
+        """Pose from the matches: ORB-SLAM2's pose-only optimisation (overridden by paper B)."""
+        obs = self.observations(feats, kp_idx)
+        r = optimize_pose(self.camera, self.bf, T_init, self.map.P_w[map_idx], obs)
+        return Estimate(r.T_c_w, r.inliers, np.ones(len(map_idx)), np.zeros(len(feats), bool))
+
+    def observations(self, feats: Features, kp_idx: np.ndarray) -> Observations:
+        info = feats.inv_sigma2(self.config.orb.scale_factor)[kp_idx]
+        return Observations.of(feats.uv[kp_idx], feats.z[kp_idx], info, self.bf)
+
+    # ------------------------------------------------------------------ results
+    def trajectory(self) -> np.ndarray:
+        """(N, 4, 4) camera-to-world pose of every processed frame, with the final keyframe poses."""
+        return np.stack([invert(T_c_kf @ self.keyframes[k].T_c_w) for k, T_c_kf in self.frame_ref])
+
+    def current_T_c_w(self) -> np.ndarray:
+        return self.T_last
+
+    # ------------------------------------------------------------------ internals
+    def _record(self, T_c_w: np.ndarray) -> None:
+        k = len(self.keyframes) - 1
+        T_c_w = normalize_pose(T_c_w)
+        self.frame_ref.append((k, T_c_w @ invert(self.keyframes[k].T_c_w)))
+        self.T_before, self.T_last = self.T_last, T_c_w
+
+    def _predict(self) -> np.ndarray:
+        if self.T_before is None:
+            return self.T_last.copy()
+        return normalize_pose(self.T_last @ invert(self.T_before) @ self.T_last)
+
+    def _local_points(self) -> np.ndarray:
+        ids = np.concatenate([kf.point_ids for kf in self.keyframes[-self.config.local_map_keyframes:]])
+        ids = np.unique(ids[ids >= 0])
+        return ids[self.map.alive[ids]]
+
+    def _project(self, ids: np.ndarray, T_c_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        P_c = transform_points(T_c_w, self.map.P_w[ids])
+        z = P_c[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = np.column_stack([self.camera.fx * P_c[:, 0] / z + self.camera.cx,
+                                  self.camera.fy * P_c[:, 1] / z + self.camera.cy])
+        inside = ((z > 0.05) & (uv[:, 0] >= 0) & (uv[:, 0] < self.camera.width)
+                  & (uv[:, 1] >= 0) & (uv[:, 1] < self.camera.height))
+        return uv, inside
+
+    def _search(self, local: np.ndarray, feats: Features, T_c_w: np.ndarray, radius: float,
+                first: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Search by projection; on the first search, widen the window and then re-initialise
+        the pose by PnP-RANSAC when too few matches are found."""
+        cfg = self.config
+        uv, inside = self._project(local, T_c_w)
+        ids = local[inside]
+        if first:
+            self.map.visible[ids] += 1
+        sf = cfg.orb.scale_factor
+        m, k = search_by_projection(uv[inside], self.map.desc[ids], feats, radius, sf,
+                                    cfg.max_descriptor_distance)
+        if not first or len(m) >= 2 * cfg.min_inliers:
+            return ids[m], k, T_c_w
+        m, k = search_by_projection(uv[inside], self.map.desc[ids], feats, 4 * radius, sf,
+                                    cfg.max_descriptor_distance)
+        if len(m) >= 2 * cfg.min_inliers:
+            return ids[m], k, T_c_w
+        T = self._pnp(local, feats)
+        if T is None:
+            return ids[m], k, T_c_w
+        uv, inside = self._project(local, T)
+        ids = local[inside]
+        m, k = search_by_projection(uv[inside], self.map.desc[ids], feats, radius, sf,
+                                    cfg.max_descriptor_distance)
+        return ids[m], k, T
+
+    def _pnp(self, local: np.ndarray, feats: Features) -> np.ndarray | None:
+        a, b = match_descriptors(self.map.desc[local], feats.desc)
+        if len(a) < self.config.min_inliers:
+            return None
+        ok, rvec, tvec, inl = cv2.solvePnPRansac(
+            self.map.P_w[local[a]].astype(np.float64), feats.uv[b].astype(np.float64),
+            self.camera.K, None, iterationsCount=200, reprojectionError=4.0, confidence=0.99,
+            flags=cv2.SOLVEPNP_EPNP)
+        if not ok or inl is None or len(inl) < self.config.min_inliers:
+            return None
+        T = np.eye(4)
+        T[:3, :3] = cv2.Rodrigues(rvec)[0]
+        T[:3, 3] = tvec.ravel()
+        return T
+
+    def _add_keyframe(self, index: int, T_c_w: np.ndarray, feats: Features, map_idx: np.ndarray,
+                      kp_idx: np.ndarray, weights: np.ndarray, dynamic: np.ndarray) -> None:
+        point_ids = -np.ones(len(feats), int)
+        w = np.ones(len(feats))
+        good = weights > 0
+        point_ids[kp_idx[good]] = map_idx[good]
+        w[kp_idx[good]] = weights[good]
+        new = ((point_ids < 0) & (feats.z > 0) & (feats.z < self.config.max_point_depth_m)
+               & ~dynamic)
+        P_c = backproject(self.camera, feats.uv[new, 0], feats.uv[new, 1], feats.z[new])
+        point_ids[new] = self.map.add(transform_points(invert(T_c_w), P_c), feats.desc[new])
+        self.keyframes.append(Keyframe(index, T_c_w.copy(), feats, point_ids, w))
+        self.frames_since_kf = 0
+        if self.last_tracked == 0:
+            self.last_tracked = int(new.sum())
+
+    def _local_ba(self) -> None:
+        cfg = self.config
+        n_kf = len(self.keyframes)
+        if cfg.ba_window <= 0 or n_kf < 2:
+            return
+        window = list(range(max(0, n_kf - cfg.ba_window), n_kf))
+        pts = np.concatenate([self.keyframes[k].point_ids for k in window])
+        pts = np.unique(pts[pts >= 0])
+        pts = pts[self.map.alive[pts]]
+        # every keyframe observing these points takes part; those outside the window are fixed
+        lookup = -np.ones(len(self.map), int)
+        lookup[pts] = np.arange(len(pts))
+        kf_ids, sels = [], []
+        for k, kf in enumerate(self.keyframes):
+            sel = np.flatnonzero(kf.point_ids >= 0)
+            sel = sel[lookup[kf.point_ids[sel]] >= 0]
+            if sel.size:
+                kf_ids.append(k)
+                sels.append(sel)
+        fixed = np.array([k not in window or k == 0 for k in kf_ids])
+        if fixed.all():
+            return
+        kfs = [self.keyframes[k] for k in kf_ids]
+        kf_of_obs = np.concatenate([np.full(s.size, j) for j, s in enumerate(sels)])
+        pt_of_obs = lookup[np.concatenate([kf.point_ids[s] for kf, s in zip(kfs, sels)])]
+        obs = Observations.of(
+            np.concatenate([kf.feats.uv[s] for kf, s in zip(kfs, sels)]),
+            np.concatenate([kf.feats.z[s] for kf, s in zip(kfs, sels)]),
+            np.concatenate([kf.feats.inv_sigma2(cfg.orb.scale_factor)[s] for kf, s in zip(kfs, sels)]),
+            self.bf)
+        w = np.concatenate([kf.weights[s] for kf, s in zip(kfs, sels)])
+        T = np.stack([kf.T_c_w for kf in kfs])
+        T, P, chi2 = local_bundle_adjustment(self.camera, self.bf, T, fixed, self.map.P_w[pts],
+                                             kf_of_obs, pt_of_obs, obs, w, cfg.ba_max_nfev)
+        self.map.P_w[pts] = P
+        bad = chi2 > obs.chi2_gate  # outlier observations are erased, as in ORB-SLAM2
+        for j, (kf, s) in enumerate(zip(kfs, sels)):
+            kf.T_c_w = T[j]
+            kf.point_ids[s[bad[kf_of_obs == j]]] = -1
+        seen = self.map.visible >= cfg.cull_min_visible
+        self.map.alive &= ~(seen & (self.map.found < cfg.cull_ratio * self.map.visible))

@@ -1,0 +1,72 @@
+"""Descriptor matching of the frontend: search by projection, and plain descriptor matching."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .orb import Features
+
+
+def _unique_best(q: np.ndarray, t: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Keep one match per train index (the smallest distance); ties broken by query index."""
+    order = np.lexsort((q, d))
+    q, t = q[order], t[order]
+    _, first = np.unique(t, return_index=True)
+    keep = np.sort(first)
+    return q[keep], t[keep]
+
+
+def search_by_projection(uv_proj: np.ndarray, desc: np.ndarray, feats: Features, radius_px: float,
+                         scale_factor: float, max_distance: int = 80, ratio: float = 0.9
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Match projected map points to keypoints within a window (ORB-SLAM2's SearchByProjection).
+
+    Parameters
+    ----------
+    uv_proj : (M, 2) predicted pixel positions of the map points
+    desc : (M, 32) uint8 map point descriptors
+    feats : the frame's keypoints
+    radius_px : window half-size at octave 0; it grows with the keypoint's octave
+    max_distance : largest Hamming distance accepted (of 256 bits)
+    ratio : best distance must be below ``ratio`` times the second best in the window
+    Returns
+    -------
+    map_idx, kp_idx : (K,) int, one-to-one matches
+    """
+    if len(uv_proj) == 0 or len(feats) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    r = radius_px * scale_factor ** feats.octave  # (N,)
+    du = np.abs(uv_proj[:, None, 0] - feats.uv[None, :, 0])
+    dv = np.abs(uv_proj[:, None, 1] - feats.uv[None, :, 1])
+    window = ((du <= r) & (dv <= r)).astype(np.uint8)
+    rows = np.flatnonzero(window.any(axis=1))
+    if rows.size == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
+    knn = bf.knnMatch(desc[rows], feats.desc, k=2, mask=window[rows])
+    q, t, d = [], [], []
+    for i, m in enumerate(knn):
+        if not m or m[0].distance > max_distance:
+            continue
+        if len(m) == 2 and m[0].distance > ratio * m[1].distance:
+            continue
+        q.append(rows[i])
+        t.append(m[0].trainIdx)
+        d.append(m[0].distance)
+    if not q:
+        return np.zeros(0, int), np.zeros(0, int)
+    return _unique_best(np.array(q), np.array(t), np.array(d))
+
+
+def match_descriptors(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float = 0.75,
+                      max_distance: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Brute-force Hamming matches with Lowe's ratio test, one-to-one: (idx_a, idx_b)."""
+    if len(desc_a) < 2 or len(desc_b) < 2:
+        return np.zeros(0, int), np.zeros(0, int)
+    knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc_a, desc_b, k=2)
+    good = [(m[0].queryIdx, m[0].trainIdx, m[0].distance) for m in knn
+            if len(m) == 2 and m[0].distance < ratio * m[1].distance and m[0].distance <= max_distance]
+    if not good:
+        return np.zeros(0, int), np.zeros(0, int)
+    q, t, d = map(np.array, zip(*good))
+    return _unique_best(q, t, d)

@@ -1,0 +1,164 @@
+"""Paper B's method ``weightedstatic`` on the shared feature frontend.
+
+Per frame, in the frontend's pose step (:meth:`WeightedStaticTracker.estimate`):
+
+1. keypoints inside the semantic masks are dropped at extraction ("semantic static points");
+2. a first pose by the frontend's robust pose-only optimisation;
+3. the weighted geometric test (:mod:`.geometric`) of every match against the keyframes sharing
+   most points with the frame, with that pose; the median score over the references decides;
+4. initial weights ``phi0 = eta * mask_seg + omega * mask_geo`` (eq. 6; mask_seg = 1 for a point
+   outside the semantic masks, mask_geo = 1 for a point the geometric test keeps);
+5. joint LM over pose and weights (:mod:`.weighted_ba`). Matches with a final weight below
+   ``min_weight`` or a chi2 beyond the gate are outliers; points judged dynamic never become
+   map points, and keyframe observations keep their weights for the local bundle adjustment.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..evaluation import MaskScores, confusion
+from ..features.frontend import Estimate, FeatureTracker, FrontendConfig
+from ..features.method import FrontendMethod
+from ..features.optimize import CHI2_STEREO, optimize_pose
+from ..geometry import invert
+from .geometric import GeometricConfig, weighted_geometric_test
+from .weighted_ba import joint_pose_and_weights
+
+
+@dataclass
+class WeightedStaticConfig:
+    """Parameters of paper B (the paper's values where it gives them).
+
+    Attributes
+    ----------
+    frontend : the shared feature frontend, see :class:`FrontendConfig`
+    geometric : the weighted geometric test (sigma1, sigma2), see :class:`GeometricConfig`
+    eta, omega : contributions of the semantic and geometric masks to the initial weight
+        (eq. 6; 0.5 and 0.5 in the paper)
+    lam : weight of the prior pulling each weight to its initial value (units of chi2)
+    lm_iterations : Levenberg-Marquardt iterations of the joint optimisation
+    min_weight : a match whose final weight is below this is an outlier
+    use_geometry : False skips the geometric test (ablation: mask_geo = 1 everywhere)
+    use_weights : False replaces the joint optimisation by dropping the geometrically dynamic
+        points and running the frontend's pose-only optimisation (ablation)
+    """
+
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    geometric: GeometricConfig = field(default_factory=GeometricConfig)
+    eta: float = 0.5
+    omega: float = 0.5
+    lam: float = CHI2_STEREO
+    lm_iterations: int = 20
+    min_weight: float = 0.25
+    use_geometry: bool = True
+    use_weights: bool = True
+    cull_dynamic: bool = True
+
+
+class WeightedStaticTracker(FeatureTracker):
+    """The frontend with paper B's pose step."""
+
+    def __init__(self, camera, config: WeightedStaticConfig):
+        super().__init__(camera, config.frontend)
+        self.paper = config
+
+    def reference_keyframes(self, map_idx: np.ndarray, candidates: int = 20) -> list[int]:
+        """Indices of the keyframes (among the latest ``candidates``) sharing most of the points."""
+        first = max(0, len(self.keyframes) - candidates)
+        shared = [np.isin(kf.point_ids, map_idx).sum() for kf in self.keyframes[first:]]
+        order = np.argsort(-np.asarray(shared), kind="stable")[: self.paper.geometric.reference_keyframes]
+        return [first + int(i) for i in order if shared[i] > 0]
+
+    def geometric_scores(self, feats, map_idx: np.ndarray, kp_idx: np.ndarray,
+                         T_c_w: np.ndarray) -> np.ndarray:
+        """(K,) median delta of each match over its reference keyframes (nan: seen in none)."""
+        refs = self.reference_keyframes(map_idx)
+        delta = np.full((len(map_idx), max(len(refs), 1)), np.nan)
+        for r, k in enumerate(refs):
+            kf = self.keyframes[k]
+            lookup = -np.ones(len(self.map), int)
+            seen = kf.point_ids >= 0
+            lookup[kf.point_ids[seen]] = np.flatnonzero(seen)
+            idx = lookup[map_idx]
+            has = idx >= 0
+            T = T_c_w @ invert(kf.T_c_w)
+            test = weighted_geometric_test(self.camera, T[:3, :3], T[:3, 3], kf.feats.uv[idx[has]],
+                                           kf.feats.z[idx[has]], feats.uv[kp_idx[has]],
+                                           feats.z[kp_idx[has]], self.paper.geometric)
+            delta[has, r] = test.delta
+        with np.errstate(all="ignore"):
+            import warnings
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-nan rows: no reference
+                return np.nanmedian(delta, axis=1)
+
+    def estimate(self, frame, feats, map_idx, kp_idx, T_init) -> Estimate:
+        cfg = self.paper
+        obs = self.observations(feats, kp_idx)
+        P = self.map.P_w[map_idx]
+        first = optimize_pose(self.camera, self.bf, T_init, P, obs)
+        if cfg.use_geometry:
+            delta = self.geometric_scores(feats, map_idx, kp_idx, first.T_c_w)
+            geo_dynamic = np.nan_to_num(delta) >= cfg.geometric.sigma2
+        else:
+            delta = np.full(len(map_idx), np.nan)
+            geo_dynamic = np.zeros(len(map_idx), bool)
+        phi0 = cfg.eta * 1.0 + cfg.omega * (~geo_dynamic)
+        info = {"delta": delta, "geo_dynamic": geo_dynamic, "phi0": phi0, "T_first": first.T_c_w}
+        if cfg.use_weights:
+            jr = joint_pose_and_weights(self.camera, self.bf, first.T_c_w, P, obs, phi0, cfg.lam,
+                                        cfg.lm_iterations)
+            T, phi = jr.T_c_w, jr.phi
+            inliers = (jr.chi2 < obs.chi2_gate) & (phi >= cfg.min_weight)
+            weights = phi**2
+            info.update(phi=phi, cost=jr.cost)
+        else:
+            keep = np.flatnonzero(~geo_dynamic)
+            r = optimize_pose(self.camera, self.bf, first.T_c_w, P[keep], obs[keep])
+            T = r.T_c_w
+            inliers = np.zeros(len(map_idx), bool)
+            inliers[keep] = r.inliers
+            weights = np.ones(len(map_idx))
+        dynamic = np.zeros(len(feats), bool)
+        dynamic[kp_idx[geo_dynamic]] = True
+        if cfg.cull_dynamic:
+            self.map.alive[map_idx[geo_dynamic]] = False
+        return Estimate(T, inliers, weights, dynamic, info)
+
+
+class WeightedStaticMethod(FrontendMethod):
+    """Method ``weightedstatic``; ``extras`` scores the dynamic-point classification against
+    the ground-truth masks (synthetic data): the geometric test, and the final weights
+    (phi < phi0 / 2 counted as dynamic)."""
+
+    name = "weightedstatic"
+    config_type = WeightedStaticConfig
+    tracker_type = WeightedStaticTracker
+
+    def __init__(self, camera, config, masks=None):
+        super().__init__(camera, config, masks)
+        self.counts = {"geometric": np.zeros(3, int), "weights": np.zeros(3, int)}
+
+    def _process(self, frame, timer):
+        tf = super()._process(frame, timer)
+        est = tf.estimate
+        if est is not None and frame.mask is not None and len(tf.kp_idx):
+            uv = np.rint(tf.feats.uv[tf.kp_idx]).astype(int)
+            H, W = frame.mask.shape
+            truth = frame.mask[np.clip(uv[:, 1], 0, H - 1), np.clip(uv[:, 0], 0, W - 1)]
+            self.counts["geometric"] += confusion(est.info["geo_dynamic"], truth)
+            if "phi" in est.info:
+                self.counts["weights"] += confusion(est.info["phi"] < 0.5 * est.info["phi0"], truth)
+        return tf
+
+    def extras(self) -> dict:
+        out = super().extras()
+        for k, c in self.counts.items():
+            if c.any():
+                s = MaskScores.from_counts(*map(int, c))
+                out[f"dynamic_points_{k}"] = {"precision": s.precision, "recall": s.recall,
+                                              "tp": int(c[0]), "fp": int(c[1]), "fn": int(c[2])}
+        return out
