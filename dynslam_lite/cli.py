@@ -20,7 +20,23 @@ from . import tables
 
 DEFAULT_CACHE = Path("build") / "data"
 BASELINES = ("static-dense", "opencv-odometry")
-REPRODUCED = BASELINES + ("depthcluster",)
+REPRODUCED = BASELINES + ("depthcluster", "static-orb", "weightedstatic")
+
+# Runs of the reproduction: label -> (method, mask source, parameters). The label is the
+# 'method' column of the tables. Synthetic runs use the ground-truth masks where a method takes
+# masks; real data has no ground-truth masks.
+MASKED = ("weightedstatic",)  # methods built on semantic masks (static-orb takes them optionally)
+SYNTHETIC_RUNS = {m: (m, "oracle" if m in MASKED else "none", {}) for m in REPRODUCED}
+REAL_RUNS = {m: (m, "none", {}) for m in REPRODUCED}
+# Paper B's ablation, on the walking scenes only
+ABLATION_RUNS = {
+    "static-orb[oracle]": ("static-orb", "oracle", {}),
+    "static-orb[oracle:degraded]": ("static-orb", "oracle:degraded", {}),
+    "weightedstatic[oracle:degraded,geometry]": ("weightedstatic", "oracle:degraded", {"use_weights": False}),
+    "weightedstatic[oracle:degraded,weights]": ("weightedstatic", "oracle:degraded", {"use_geometry": False}),
+    "weightedstatic[oracle:degraded]": ("weightedstatic", "oracle:degraded", {}),
+    "weightedstatic[none]": ("weightedstatic", "none", {}),
+}
 
 
 def _parse_sets(items: list[str]) -> dict:
@@ -42,7 +58,7 @@ def cmd_synth(a) -> int:
 
 def cmd_run(a) -> int:
     seq = open_sequence(a.seq_dir, a.camera, a.start, a.frames)
-    result = run_method(a.method, seq, _parse_sets(a.set), progress=not a.quiet)
+    result = run_method(a.method, seq, _parse_sets(a.set), progress=not a.quiet, masks=a.masks)
     write_trajectory(a.out, result.trajectory)
     stats = result.stats()
     if a.stats:
@@ -96,7 +112,10 @@ def cmd_bench(a) -> int:
         seq = open_sequence(path.path)
     print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s} {'frames':>7s}")
     for method in a.methods:
-        r = run_method(method, seq)
+        masks = (a.masks or ("none" if a.seq else "oracle")) if method in MASKED else "none"
+        r = run_method(method, seq, masks=masks)
+        if masks != "none":
+            print(f"{method:18s} (masks {masks})")
         for stage, ms in r.stage_ms.items():
             print(f"{method:18s} {stage:10s} {np.mean(ms):9.1f} {np.median(ms):10.1f} {len(ms):7d}")
         s = r.stats()
@@ -152,13 +171,15 @@ def _scene_job(job: tuple) -> str:
 
 
 def _evaluate_job(job: tuple) -> dict:
-    """One (sequence, method) run, evaluated; runs in a worker process."""
-    label, path, camera, count, method = job
+    """One (sequence, run) evaluated; runs in a worker process."""
+    label, path, camera, count, (run, (method, masks, params)) = job
     seq = open_sequence(path, camera, 0, count)
-    r = run_method(method, seq)
+    r = run_method(method, seq, params, masks=masks)
     e = evaluate(seq.groundtruth, r.trajectory)
-    return {"sequence": label, "method": method, "frames": len(seq), **e.as_dict(),
-            "failed_frames": len(r.failed_frames), "ms_per_frame": r.stats()["ms_per_frame"],
+    stats = r.stats()
+    return {"sequence": label, "method": run, "frames": len(seq), **e.as_dict(),
+            "failed_frames": len(r.failed_frames), "ms_per_frame": stats["ms_per_frame"],
+            "stages": {k: float(sum(v)) / len(seq) for k, v in r.stage_ms.items()},
             "extras": r.extras}
 
 
@@ -178,12 +199,13 @@ def cmd_reproduce(a) -> int:
         paths = pool.map(_scene_job, [(str(cache), s, frames, a.seed) for s in scenes])
         for scene, path in zip(scenes, paths):
             print(f"[data] synthetic {scene}: {frames} frames at {path}", flush=True)
-            jobs += [(f"synthetic/{scene}", path, None, None, m) for m in REPRODUCED]
+            runs = dict(SYNTHETIC_RUNS, **(ABLATION_RUNS if scene.startswith("walking") else {}))
+            jobs += [(f"synthetic/{scene}", path, None, None, run) for run in runs.items()]
         for d in a.data or []:
-            jobs += [(f"real/{Path(d).resolve().name}", d, None, None, m) for m in REPRODUCED]
+            jobs += [(f"real/{Path(d).resolve().name}", d, None, None, run) for run in REAL_RUNS.items()]
         results = []
         for res in pool.map(_evaluate_job, jobs):
-            print(f"[run] {res['sequence']:36s} {res['method']:16s} ATE {res['ate_m']['rmse']:.4f} m "
+            print(f"[run] {res['sequence']:32s} {res['method']:42s} ATE {res['ate_m']['rmse']:.4f} m "
                   f"RPE {res['rpe_trans_m_per_s']['rmse']:.4f} m/s "
                   f"{res['rpe_rot_deg_per_s']['rmse']:.3f} deg/s", flush=True)
             results.append(res)
@@ -197,6 +219,14 @@ def cmd_reproduce(a) -> int:
             ("paper_a_table2", "Paper A, Table 2: absolute trajectory error (m)", tables.paper_a_table2),
             ("paper_a_masks", "Paper A: moving-object masks of depthcluster against ground truth",
              tables.paper_a_masks),
+            ("paper_b_table1", "Paper B, Table 1: absolute trajectory error (m)", tables.paper_b_table1),
+            ("paper_b_table2", "Paper B, Table 2: relative pose error (translation)", tables.paper_b_table2),
+            ("paper_b_table3", "Paper B, Table 3: ATE against other systems (m)", tables.paper_b_table3),
+            ("paper_b_table4", "Paper B, Table 4: tracking time per frame", tables.paper_b_table4),
+            ("paper_b_ablation", "Paper B: what the geometric test and the weights add over masks",
+             tables.paper_b_ablation),
+            ("paper_b_points", "Paper B: dynamic-point classification against ground truth",
+             tables.paper_b_points),
         ):
             header, rows, notes = make(results)
             writer.table(f"tables/{stem}", title, header, rows, notes=notes + src)
@@ -258,6 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--camera", default=None, help="fr1, fr2, fr3 or bonn (default: guessed)")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="method parameter")
     r.add_argument("--stats", help="write run statistics (JSON) here")
+    r.add_argument("--masks", default="none",
+                   help="semantic masks for methods that use them: none, oracle, oracle:degraded, "
+                        "files:DIR (see dynslam_lite/masks.py)")
     r.add_argument("--quiet", action="store_true")
     r.set_defaults(func=cmd_run)
 
@@ -277,6 +310,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--camera", default=None)
     b.add_argument("--methods", nargs="+", default=list(REPRODUCED), choices=sorted(METHODS))
     b.add_argument("--cache", default=str(DEFAULT_CACHE))
+    b.add_argument("--masks", default=None,
+                   help="mask source of weightedstatic (default: oracle on the synthetic scene, "
+                        "none on --seq)")
     b.set_defaults(func=cmd_bench)
 
     rp = sub.add_parser("reproduce", help="batch reproduction into reports/")

@@ -56,7 +56,7 @@ class FrontendConfig:
     local_map_keyframes : the local map holds the points of this many latest keyframes
     ba_window : keyframes optimised by local bundle adjustment (older observers held fixed);
         0 = no local BA
-    ba_max_nfev : function evaluations of each local BA
+    ba_max_nfev : function evaluations of each of the two phases of a local BA
     cull_ratio, cull_min_visible : a point found in fewer than ``cull_ratio`` of the frames
         where it was visible (after ``cull_min_visible`` of them) is removed
     """
@@ -72,7 +72,7 @@ class FrontendConfig:
     max_point_depth_m: float = 4.0
     local_map_keyframes: int = 8
     ba_window: int = 5
-    ba_max_nfev: int = 8
+    ba_max_nfev: int = 5
     cull_ratio: float = 0.25
     cull_min_visible: int = 4
 

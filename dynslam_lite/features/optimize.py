@@ -167,9 +167,9 @@ def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray,
                             max_nfev: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bundle adjustment of a keyframe window: poses (except the fixed ones) and points.
 
-    Solved with scipy's trust-region least squares (``least_squares``, Huber loss at the stereo
-    chi2 gate, finite-difference Jacobian with its sparsity pattern). Poses are updated as
-    ``exp(xi_k) T_k``.
+    Solved with scipy's trust-region least squares (``least_squares``, analytic sparse
+    Jacobian) in ORB-SLAM2's two phases: Huber-weighted, then the inliers alone. Poses are
+    updated as ``exp(xi_k) T_k``.
 
     Parameters
     ----------
@@ -196,6 +196,9 @@ def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray,
             T[k] = se3_exp(x[6 * slot[k]: 6 * slot[k] + 6]) @ T0[k]
         return T, x[nP:].reshape(M, 3)
 
+    n = len(pt_of_obs)
+    has = slot[kf_of_obs] >= 0
+
     def errors(x):
         T, P = unpack(x)
         R, t = T[kf_of_obs, :3, :3], T[kf_of_obs, :3, 3]
@@ -204,27 +207,43 @@ def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray,
         u = camera.fx * P_c[:, 0] / Z + camera.cx
         e = obs.uvr - np.column_stack([u, camera.fy * P_c[:, 1] / Z + camera.cy, u - bf / Z])
         e[~obs.stereo, 2] = 0.0
-        return e
+        return e, P_c, R
 
     def fun(x):
-        return (errors(x) * sw[:, None]).ravel()
+        return (errors(x)[0] * sw[:, None]).ravel()
 
-    n = len(pt_of_obs)
-    # sparsity: each error row depends on its point (3 columns) and its keyframe (6, if free)
-    r_pt = np.repeat(np.arange(3 * n), 3)
-    c_pt = (nP + 3 * np.repeat(pt_of_obs, 3)[:, None] + np.arange(3)).ravel()
-    has = np.repeat(slot[kf_of_obs] >= 0, 3)
-    r_kf = np.repeat(np.arange(3 * n)[has], 6)
-    c_kf = (6 * np.repeat(slot[kf_of_obs], 3)[has][:, None] + np.arange(6)).ravel()
-    A = coo_matrix((np.ones(len(r_pt) + len(r_kf), np.int8),
-                    (np.concatenate([r_pt, r_kf]), np.concatenate([c_pt, c_kf]))),
-                   shape=(3 * n, nP + 3 * M))
-    x0 = np.concatenate([np.zeros(nP), np.asarray(P_w, float).ravel()])
-    sol = least_squares(fun, x0, jac_sparsity=A.tocsr(), loss="huber",
-                        f_scale=np.sqrt(CHI2_STEREO), max_nfev=max_nfev, x_scale="jac",
-                        method="trf", tr_solver="lsmr")
-    T, P = unpack(sol.x)
-    chi2 = obs.info * np.sum(errors(sol.x) ** 2, axis=1)
+    def jac(x):
+        # analytic: d e / d P_w = J_p R; d e / d xi_k = J_p [I | -P_c^]. The pose derivative is
+        # taken at xi = 0 (exact at the start, a close approximation for the small steps of BA).
+        _, P_c, R = errors(x)
+        J_p = point_jacobian(camera, bf, P_c, obs.stereo) * sw[:, None, None]
+        J_pt = J_p @ R  # (n, 3, 3)
+        J_kf = J_p[has] @ np.concatenate([np.broadcast_to(np.eye(3), (has.sum(), 3, 3)),
+                                          -hat(P_c[has])], axis=2)  # (n_has, 3, 6)
+        rows = np.arange(3 * n).reshape(n, 3)
+        r_pt = np.repeat(rows, 3, axis=1).ravel()
+        c_pt = (nP + 3 * pt_of_obs[:, None, None] + np.zeros((1, 3, 1), int) + np.arange(3)).ravel()
+        r_kf = np.repeat(rows[has], 6, axis=1).ravel()
+        c_kf = (6 * slot[kf_of_obs[has]][:, None, None] + np.zeros((1, 3, 1), int) + np.arange(6)).ravel()
+        return coo_matrix((np.concatenate([J_pt.ravel(), J_kf.ravel()]),
+                           (np.concatenate([r_pt, r_kf]), np.concatenate([c_pt, c_kf]))),
+                          shape=(3 * n, nP + 3 * M)).tocsr()
+
+    # ORB-SLAM2's two phases: robust (Huber weights, here as one IRLS reweighting of a plain
+    # least-squares solve, which scipy's trust region converges on in a few steps), then the
+    # chi2 outliers leave and the inliers are solved without a kernel.
+    x = np.concatenate([np.zeros(nP), np.asarray(P_w, float).ravel()])
+    base = sw.copy()
+    gate = obs.chi2_gate
+    for phase in ("huber", "inliers"):
+        chi2 = obs.info * np.sum(errors(x)[0] ** 2, axis=1)
+        if phase == "huber":
+            sw = base * np.where(chi2 > gate, (gate / np.maximum(chi2, 1e-12)) ** 0.25, 1.0)
+        else:
+            sw = base * (chi2 <= gate)
+        x = least_squares(fun, x, jac=jac, max_nfev=max_nfev, method="trf", tr_solver="lsmr").x
+    T, P = unpack(x)
+    chi2 = obs.info * np.sum(errors(x)[0] ** 2, axis=1)
     return T, P, chi2
 
 

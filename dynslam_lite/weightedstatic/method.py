@@ -141,6 +141,7 @@ class WeightedStaticMethod(FrontendMethod):
     def __init__(self, camera, config, masks=None):
         super().__init__(camera, config, masks)
         self.counts = {"geometric": np.zeros(3, int), "weights": np.zeros(3, int)}
+        self.matches = 0
 
     def _process(self, frame, timer):
         tf = super()._process(frame, timer)
@@ -149,6 +150,7 @@ class WeightedStaticMethod(FrontendMethod):
             uv = np.rint(tf.feats.uv[tf.kp_idx]).astype(int)
             H, W = frame.mask.shape
             truth = frame.mask[np.clip(uv[:, 1], 0, H - 1), np.clip(uv[:, 0], 0, W - 1)]
+            self.matches += len(truth)
             self.counts["geometric"] += confusion(est.info["geo_dynamic"], truth)
             if "phi" in est.info:
                 self.counts["weights"] += confusion(est.info["phi"] < 0.5 * est.info["phi0"], truth)
@@ -156,6 +158,8 @@ class WeightedStaticMethod(FrontendMethod):
 
     def extras(self) -> dict:
         out = super().extras()
+        if self.matches:
+            out["matches"] = self.matches
         for k, c in self.counts.items():
             if c.any():
                 s = MaskScores.from_counts(*map(int, c))

@@ -1,0 +1,127 @@
+"""The shared RGB-D feature frontend: maths against finite differences and known poses, then
+the whole frontend (static-orb) on a synthetic static scene with ground truth."""
+import numpy as np
+import pytest
+
+from dynslam_lite.evaluation import evaluate
+from dynslam_lite.features import (FeatureTracker, Observations, extract, local_bundle_adjustment,
+                                   optimize_pose, search_by_projection)
+from dynslam_lite.features.optimize import pose_jacobian, residuals
+from dynslam_lite.geometry import PinholeCamera, invert, project, se3_exp, se3_log
+from dynslam_lite.io import Frame, open_sequence
+from dynslam_lite.pipeline import run_method
+
+CAM = PinholeCamera(525.0, 525.0, 319.5, 239.5)
+BF = 525.0 * 0.08
+
+
+def _points(rng, n):
+    return rng.uniform([-2, -1.5, 1.0], [2, 1.5, 4.0], (n, 3))
+
+
+def _observe(T_c_w, P_w, rng, noise_px=0.0):
+    P_c = P_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+    u, v = project(CAM, P_c)
+    uv = np.column_stack([u, v]) + rng.normal(0, noise_px, (len(P_w), 2)) if noise_px else np.column_stack([u, v])
+    return Observations.of(uv, P_c[:, 2], np.ones(len(P_w)), BF)
+
+
+def test_pose_jacobian_matches_finite_differences():
+    rng = np.random.default_rng(0)
+    P = _points(rng, 20)
+    T = se3_exp(rng.normal(0, 0.1, 6))
+    obs = _observe(np.eye(4), P, rng)  # any measurements: the Jacobian does not depend on them
+    obs.stereo[::3] = False
+    e0, P_c = residuals(CAM, BF, T[:3, :3], T[:3, 3], P, obs)
+    J = pose_jacobian(CAM, BF, P_c, obs.stereo)
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = 1e-6
+        T1 = se3_exp(d) @ T
+        e1, _ = residuals(CAM, BF, T1[:3, :3], T1[:3, 3], P, obs)
+        np.testing.assert_allclose((e1 - e0) / 1e-6, J[:, :, k], rtol=1e-5, atol=2e-3)
+
+
+def test_pose_optimisation_recovers_known_pose_despite_outliers():
+    rng = np.random.default_rng(1)
+    P = _points(rng, 300)
+    T_true = se3_exp([0.05, -0.02, 0.03, 0.02, -0.03, 0.01])
+    obs = _observe(T_true, P, rng, noise_px=0.5)
+    bad = rng.random(300) < 0.3  # 30 % gross outliers
+    obs.uvr[bad] += rng.uniform(-40, 40, (bad.sum(), 3))
+    r = optimize_pose(CAM, BF, np.eye(4), P, obs)
+    err = se3_log(r.T_c_w @ invert(T_true))
+    assert np.linalg.norm(err[:3]) < 2e-3 and np.degrees(np.linalg.norm(err[3:])) < 0.05
+    assert (r.inliers == ~bad).mean() > 0.95
+
+
+def test_local_bundle_adjustment_removes_perturbation():
+    rng = np.random.default_rng(2)
+    P = _points(rng, 150)
+    T_true = np.stack([se3_exp([0.1 * k, 0.02 * k, 0, 0, 0.02 * k, 0]) for k in range(4)])
+    kf, pt, uvr, stereo = [], [], [], []
+    for k in range(4):
+        o = _observe(T_true[k], P, rng)
+        kf += [k] * len(P)
+        pt += list(range(len(P)))
+        uvr.append(o.uvr)
+        stereo.append(o.stereo)
+    obs = Observations(np.vstack(uvr), np.concatenate(stereo), np.ones(4 * len(P)))
+    T0 = T_true.copy()
+    for k in (1, 2, 3):
+        T0[k] = se3_exp(rng.normal(0, 0.01, 6)) @ T_true[k]
+    P0 = P + rng.normal(0, 0.02, P.shape)
+    fixed = np.array([True, False, False, False])
+    T, P1, chi2 = local_bundle_adjustment(CAM, BF, T0, fixed, P0, np.array(kf), np.array(pt), obs,
+                                          max_nfev=30)
+    for k in (1, 2, 3):
+        assert np.linalg.norm(se3_log(T[k] @ invert(T_true[k]))) < 1e-4
+    assert np.abs(P1 - P).max() < 1e-3 and np.median(chi2) < 1e-4
+
+
+def test_extract_spreads_keypoints_and_honours_exclusion():
+    rng = np.random.default_rng(3)
+    gray = (rng.random((480, 640)) * 255).astype(np.uint8)
+    gray = np.kron(gray[::8, ::8], np.ones((8, 8), np.uint8))  # blocky texture: corners everywhere
+    depth = np.full((480, 640), 2.0, np.float32)
+    f = extract(gray, depth)
+    assert 900 <= len(f) <= 1000
+    cells = np.histogram2d(f.uv[:, 1], f.uv[:, 0], bins=(6, 8), range=((0, 480), (0, 640)))[0]
+    inner = cells[1:-1, 1:-1]  # ORB keeps no corner within 31 px of the border
+    assert inner.min() > 0.5 * inner.mean()  # spread, not clustered
+    assert np.allclose(f.z, 2.0)
+    exclude = np.zeros((480, 640), bool)
+    exclude[:, :320] = True
+    g = extract(gray, depth, exclude=exclude)
+    assert (g.uv[:, 0] >= 319.5).all() and len(g) > 0.4 * len(f)
+
+
+def test_search_by_projection_finds_the_true_partner():
+    rng = np.random.default_rng(4)
+    gray = np.kron((rng.random((60, 80)) * 255).astype(np.uint8), np.ones((8, 8), np.uint8))
+    f = extract(gray, np.full(gray.shape, 2.0, np.float32))
+    shifted = f.uv + rng.normal(0, 2.0, f.uv.shape)  # predicted positions within 2 px
+    m, k = search_by_projection(shifted, f.desc, f, 8.0, 1.2)
+    assert len(m) > 0.9 * len(f)
+    assert (m == k).mean() > 0.98
+
+
+def test_static_orb_tracks_static_scene_below_2cm(scene):
+    seq = open_sequence(scene("static_xyz", 150))
+    r = run_method("static-orb", seq)
+    e = evaluate(seq.groundtruth, r.trajectory)
+    assert len(r.trajectory) == len(seq) and not r.failed_frames
+    assert e.ate.rmse < 0.02, e.ate.rmse
+
+
+def test_frontend_reports_failure_on_textureless_frames():
+    tr = FeatureTracker(CAM)
+    rng = np.random.default_rng(5)
+    gray = np.kron((rng.random((60, 80)) * 255).astype(np.uint8), np.ones((8, 8), np.uint8))
+    rgb = np.repeat(gray[:, :, None], 3, axis=2)
+    depth = np.full((480, 640), 2.0, np.float32)
+    assert tr.process(Frame(0, 0.0, rgb, depth)).ok
+    blank = np.full_like(rgb, 128)
+    tf = tr.process(Frame(1, 0.033, blank, depth))
+    assert not tf.ok and "matches" in tf.reason
+    assert len(tr.trajectory()) == 2
