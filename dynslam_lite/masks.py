@@ -30,6 +30,13 @@ def split_instances(mask: np.ndarray, min_area: int = 50) -> list[np.ndarray]:
     return [cc == i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area]
 
 
+def union(masks: list[np.ndarray]) -> np.ndarray | None:
+    """(H, W) bool union of instance masks, or None when there are none."""
+    if not masks:
+        return None
+    return np.logical_or.reduce(masks)
+
+
 class NoMasks:
     name = "none"
 

@@ -37,12 +37,14 @@ def _get(idx, seq, method, metric, stat):
     return "-" if v is None else fmt(v, 4)
 
 
-def _triple(idx, seq, method) -> str:
+def _stats(idx, seq, method, metric: str, keys: tuple[str, ...]) -> str:
+    """Statistics ``keys`` of one measured metric joined by ' / ', '-' when not measured."""
     r = idx.get((seq, method))
-    if not r:
-        return "-"
-    a = r["ate_m"]
-    return f"{fmt(a['max'], 4)} / {fmt(a['min'], 4)} / {fmt(a['rmse'], 4)}"
+    return " / ".join(fmt(r[metric][k], 4) for k in keys) if r else "-"
+
+
+def _triple(idx, seq, method) -> str:
+    return _stats(idx, seq, method, "ate_m", ("max", "min", "rmse"))
 
 
 PAPER_A_MEASURED = ("static-dense", "opencv-odometry", "depthcluster")
@@ -141,12 +143,12 @@ PAPER_B_MEASURED = ("static-orb", "weightedstatic")
 
 
 def _stats3(idx, seq, method, metric) -> str:
-    """'RMSE / median / S.D.' of a measured run, '-' when absent."""
-    r = idx.get((seq, method))
-    if not r:
-        return "-"
-    s = r[metric]
-    return " / ".join(fmt(s[k], 4) for k in ("rmse", "median", "std"))
+    return _stats(idx, seq, method, metric, ("rmse", "median", "std"))
+
+
+def _b_seq(name: str) -> str:
+    """Where paper B's sequence ``name`` (w_xyz, ...) is measured: its synthetic analogue."""
+    return f"synthetic/{P.SYNTHETIC_ANALOGUE[P.B_SEQUENCES[name]]}"
 
 
 def _improvement(idx, seq, metric) -> str:
@@ -165,7 +167,7 @@ def _paper_b_rpe_ate(results, table, metric, unit_note) -> Table:
               "weightedstatic (measured) RMSE / median / S.D.", "RMSE reduction % (measured)"]
     rows = []
     for name, (orb, paper) in table.items():
-        seq = f"synthetic/{P.SYNTHETIC_ANALOGUE[P.B_SEQUENCES[name]]}"
+        seq = _b_seq(name)
         rows.append([name, seq, _frames(idx, seq, ms), " / ".join(map(str, orb)),
                      " / ".join(map(str, paper)), _stats3(idx, seq, "static-orb", metric),
                      _stats3(idx, seq, "weightedstatic", metric), _improvement(idx, seq, metric)])
@@ -203,12 +205,11 @@ def paper_b_table3(results: list[dict]) -> Table:
               + [f"{m} (measured) RMSE / S.D." for m in ms])
 
     def pair(seq, m):
-        r = idx.get((seq, m))
-        return "-" if not r else f"{fmt(r['ate_m']['rmse'], 4)} / {fmt(r['ate_m']['std'], 4)}"
+        return _stats(idx, seq, m, "ate_m", ("rmse", "std"))
 
     rows = []
     for name, pubs in P.B_TABLE3.items():
-        seq = f"synthetic/{P.SYNTHETIC_ANALOGUE[P.B_SEQUENCES[name]]}"
+        seq = _b_seq(name)
         rows.append([name, seq, _frames(idx, seq, ms)] + [f"{a} / {b}" for a, b in pubs]
                     + [pair(seq, m) for m in ms])
     for seq in _real(results):

@@ -24,12 +24,13 @@ Dynamic methods change step 3 through :meth:`FeatureTracker.estimate` (paper B) 
 """
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from ..geometry import PinholeCamera, backproject, invert, normalize_pose, transform_points
+from ..geometry import PinholeCamera, backproject, invert, normalize_pose, project, transform_points
 from .matching import match_descriptors, search_by_projection
 from .optimize import Observations, local_bundle_adjustment, optimize_pose
 from .orb import Features, ORBConfig, extract
@@ -183,8 +184,6 @@ class FeatureTracker:
 
         ``exclude``: (H, W) bool, keypoints inside are dropped (semantic masks).
         """
-        from contextlib import nullcontext
-
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("orb"):
             feats = extract(frame.gray, frame.depth, self.config.orb, exclude)
@@ -246,9 +245,6 @@ class FeatureTracker:
         """(N, 4, 4) camera-to-world pose of every processed frame, with the final keyframe poses."""
         return np.stack([invert(T_c_kf @ self.keyframes[k].T_c_w) for k, T_c_kf in self.frame_ref])
 
-    def current_T_c_w(self) -> np.ndarray:
-        return self.T_last
-
     # ------------------------------------------------------------------ internals
     def _record(self, T_c_w: np.ndarray) -> None:
         k = len(self.keyframes) - 1
@@ -268,11 +264,8 @@ class FeatureTracker:
 
     def _project(self, ids: np.ndarray, T_c_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         P_c = transform_points(T_c_w, self.map.P_w[ids])
-        z = P_c[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uv = np.column_stack([self.camera.fx * P_c[:, 0] / z + self.camera.cx,
-                                  self.camera.fy * P_c[:, 1] / z + self.camera.cy])
-        inside = ((z > 0.05) & (uv[:, 0] >= 0) & (uv[:, 0] < self.camera.width)
+        uv = np.column_stack(project(self.camera, P_c))
+        inside = ((P_c[:, 2] > 0.05) & (uv[:, 0] >= 0) & (uv[:, 0] < self.camera.width)
                   & (uv[:, 1] >= 0) & (uv[:, 1] < self.camera.height))
         return uv, inside
 
@@ -281,27 +274,27 @@ class FeatureTracker:
         """Search by projection; on the first search, widen the window and then re-initialise
         the pose by PnP-RANSAC when too few matches are found."""
         cfg = self.config
-        uv, inside = self._project(local, T_c_w)
-        ids = local[inside]
-        if first:
-            self.map.visible[ids] += 1
-        sf = cfg.orb.scale_factor
-        m, k = search_by_projection(uv[inside], self.map.desc[ids], feats, radius, sf,
-                                    cfg.max_descriptor_distance)
-        if not first or len(m) >= 2 * cfg.min_inliers:
-            return ids[m], k, T_c_w
-        m, k = search_by_projection(uv[inside], self.map.desc[ids], feats, 4 * radius, sf,
-                                    cfg.max_descriptor_distance)
-        if len(m) >= 2 * cfg.min_inliers:
-            return ids[m], k, T_c_w
+
+        def find(T, r):
+            uv, inside = self._project(local, T)
+            ids = local[inside]
+            m, k = search_by_projection(uv[inside], self.map.desc[ids], feats, r,
+                                        cfg.orb.scale_factor, cfg.max_descriptor_distance)
+            return ids[m], k, ids
+
+        mi, ki, seen = find(T_c_w, radius)
+        if not first:
+            return mi, ki, T_c_w
+        self.map.visible[seen] += 1
+        if len(mi) < 2 * cfg.min_inliers:
+            mi, ki, _ = find(T_c_w, 4 * radius)
+        if len(mi) >= 2 * cfg.min_inliers:
+            return mi, ki, T_c_w
         T = self._pnp(local, feats)
         if T is None:
-            return ids[m], k, T_c_w
-        uv, inside = self._project(local, T)
-        ids = local[inside]
-        m, k = search_by_projection(uv[inside], self.map.desc[ids], feats, radius, sf,
-                                    cfg.max_descriptor_distance)
-        return ids[m], k, T
+            return mi, ki, T_c_w
+        mi, ki, _ = find(T, radius)
+        return mi, ki, T
 
     def _pnp(self, local: np.ndarray, feats: Features) -> np.ndarray | None:
         a, b = match_descriptors(self.map.desc[local], feats.desc)
@@ -359,11 +352,7 @@ class FeatureTracker:
         kfs = [self.keyframes[k] for k in kf_ids]
         kf_of_obs = np.concatenate([np.full(s.size, j) for j, s in enumerate(sels)])
         pt_of_obs = lookup[np.concatenate([kf.point_ids[s] for kf, s in zip(kfs, sels)])]
-        obs = Observations.of(
-            np.concatenate([kf.feats.uv[s] for kf, s in zip(kfs, sels)]),
-            np.concatenate([kf.feats.z[s] for kf, s in zip(kfs, sels)]),
-            np.concatenate([kf.feats.inv_sigma2(cfg.orb.scale_factor)[s] for kf, s in zip(kfs, sels)]),
-            self.bf)
+        obs = Observations.concat([self.observations(kf.feats, s) for kf, s in zip(kfs, sels)])
         w = np.concatenate([kf.weights[s] for kf, s in zip(kfs, sels)])
         T = np.stack([kf.T_c_w for kf in kfs])
         T, P, chi2 = local_bundle_adjustment(self.camera, self.bf, T, fixed, self.map.P_w[pts],

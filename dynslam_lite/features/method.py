@@ -8,14 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import invert
+from ..masks import NoMasks, union
 from .frontend import FeatureTracker, FrontendConfig
-
-
-def union(masks: list[np.ndarray], shape: tuple[int, int]) -> np.ndarray | None:
-    """(H, W) bool union of instance masks, or None when there are none."""
-    if not masks:
-        return None
-    return np.logical_or.reduce(masks) if len(masks) > 1 else masks[0].copy()
 
 
 class FrontendMethod:
@@ -29,8 +23,6 @@ class FrontendMethod:
     tracker_type = FeatureTracker
 
     def __init__(self, camera, config, masks=None):
-        from ..masks import NoMasks
-
         self.masks = masks or NoMasks()
         self.tracker = self.tracker_type(camera, config)
         self.frames = []  # TrackedFrame per frame, for inspection
@@ -38,7 +30,7 @@ class FrontendMethod:
     def _process(self, frame, timer):
         with timer.stage("masks"):
             instances = self.masks(frame)
-        tf = self.tracker.process(frame, union(instances, frame.depth.shape), timer)
+        tf = self.tracker.process(frame, union(instances), timer)
         self.frames.append(tf)
         return tf
 

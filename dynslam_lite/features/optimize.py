@@ -44,6 +44,11 @@ class Observations:
         ur = np.where(stereo, uv[:, 0] - bf / np.where(stereo, z, 1.0), 0.0)
         return cls(np.column_stack([uv, ur]), stereo, np.asarray(info, float))
 
+    @classmethod
+    def concat(cls, parts: list["Observations"]) -> "Observations":
+        return cls(np.concatenate([o.uvr for o in parts]), np.concatenate([o.stereo for o in parts]),
+                   np.concatenate([o.info for o in parts]))
+
     def __getitem__(self, idx) -> "Observations":
         return Observations(self.uvr[idx], self.stereo[idx], self.info[idx])
 
@@ -58,7 +63,8 @@ def residuals(camera: PinholeCamera, bf: float, R: np.ndarray, t: np.ndarray, P_
 
     Parameters
     ----------
-    R, t : rotation (3, 3) and translation (3,) of ``T_c_w`` (world to camera)
+    R, t : rotation (3, 3) and translation (3,) of ``T_c_w`` (world to camera), or one per
+        observation, (N, 3, 3) and (N, 3)
     P_w : (N, 3) map points, world frame, metres
     obs : the N observations
     Returns
@@ -66,7 +72,7 @@ def residuals(camera: PinholeCamera, bf: float, R: np.ndarray, t: np.ndarray, P_
     e : (N, 3) pixels, ``obs - projection``, third row 0 where there is no depth
     P_c : (N, 3) the points in the camera frame
     """
-    P_c = P_w @ R.T + t
+    P_c = (P_w @ R.T if R.ndim == 2 else np.einsum("nij,nj->ni", R, P_w)) + t
     Z = np.where(P_c[:, 2] > 1e-6, P_c[:, 2], 1e-6)
     u = camera.fx * P_c[:, 0] / Z + camera.cx
     v = camera.fy * P_c[:, 1] / Z + camera.cy
@@ -90,10 +96,13 @@ def point_jacobian(camera: PinholeCamera, bf: float, P_c: np.ndarray, stereo: np
     return J
 
 
-def pose_jacobian(camera: PinholeCamera, bf: float, P_c: np.ndarray, stereo: np.ndarray) -> np.ndarray:
+def pose_jacobian(camera: PinholeCamera, bf: float, P_c: np.ndarray, stereo: np.ndarray,
+                  row_scale: np.ndarray | None = None) -> np.ndarray:
     """(N, 3, 6) derivative of the error w.r.t. a left perturbation ``T_c_w <- exp(xi) T_c_w``,
-    ``xi = (rho, phi)``: dP_c = rho + phi x P_c."""
+    ``xi = (rho, phi)``: dP_c = rho + phi x P_c. ``row_scale`` (N,) whitens each observation."""
     J_p = point_jacobian(camera, bf, P_c, stereo)
+    if row_scale is not None:
+        J_p = J_p * row_scale[:, None, None]
     dP = np.zeros((len(P_c), 3, 6))
     dP[:, :, :3] = np.eye(3)
     dP[:, :, 3:] = -hat(P_c)
@@ -201,12 +210,8 @@ def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray,
 
     def errors(x):
         T, P = unpack(x)
-        R, t = T[kf_of_obs, :3, :3], T[kf_of_obs, :3, 3]
-        P_c = np.einsum("nij,nj->ni", R, P[pt_of_obs]) + t
-        Z = np.where(P_c[:, 2] > 1e-6, P_c[:, 2], 1e-6)
-        u = camera.fx * P_c[:, 0] / Z + camera.cx
-        e = obs.uvr - np.column_stack([u, camera.fy * P_c[:, 1] / Z + camera.cy, u - bf / Z])
-        e[~obs.stereo, 2] = 0.0
+        R = T[kf_of_obs, :3, :3]
+        e, P_c = residuals(camera, bf, R, T[kf_of_obs, :3, 3], P[pt_of_obs], obs)
         return e, P_c, R
 
     def fun(x):
@@ -216,10 +221,8 @@ def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray,
         # analytic: d e / d P_w = J_p R; d e / d xi_k = J_p [I | -P_c^]. The pose derivative is
         # taken at xi = 0 (exact at the start, a close approximation for the small steps of BA).
         _, P_c, R = errors(x)
-        J_p = point_jacobian(camera, bf, P_c, obs.stereo) * sw[:, None, None]
-        J_pt = J_p @ R  # (n, 3, 3)
-        J_kf = J_p[has] @ np.concatenate([np.broadcast_to(np.eye(3), (has.sum(), 3, 3)),
-                                          -hat(P_c[has])], axis=2)  # (n_has, 3, 6)
+        J_pt = (point_jacobian(camera, bf, P_c, obs.stereo) * sw[:, None, None]) @ R  # (n, 3, 3)
+        J_kf = pose_jacobian(camera, bf, P_c[has], obs.stereo[has], sw[has])  # (n_has, 3, 6)
         rows = np.arange(3 * n).reshape(n, 3)
         r_pt = np.repeat(rows, 3, axis=1).ravel()
         c_pt = (nP + 3 * pt_of_obs[:, None, None] + np.zeros((1, 3, 1), int) + np.arange(3)).ravel()

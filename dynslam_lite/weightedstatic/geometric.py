@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import PinholeCamera
+from ..geometry import PinholeCamera, backproject
 
 
 @dataclass
@@ -58,8 +58,7 @@ class GeometricConfig:
 
 def rays(camera: PinholeCamera, uv: np.ndarray) -> np.ndarray:
     """(N, 2) pixels -> (N, 3) rays K^-1 [u, v, 1]."""
-    return np.column_stack([(uv[:, 0] - camera.cx) / camera.fx, (uv[:, 1] - camera.cy) / camera.fy,
-                            np.ones(len(uv))])
+    return backproject(camera, uv[:, 0], uv[:, 1], np.ones(len(uv)))
 
 
 @dataclass

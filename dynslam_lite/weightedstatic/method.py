@@ -88,12 +88,10 @@ class WeightedStaticTracker(FeatureTracker):
                                            kf.feats.z[idx[has]], feats.uv[kp_idx[has]],
                                            feats.z[kp_idx[has]], self.paper.geometric)
             delta[has, r] = test.delta
-        with np.errstate(all="ignore"):
-            import warnings
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)  # all-nan rows: no reference
-                return np.nanmedian(delta, axis=1)
+        out = np.full(len(map_idx), np.nan)  # nan: the point is seen in no reference
+        seen = np.isfinite(delta).any(axis=1)
+        out[seen] = np.nanmedian(delta[seen], axis=1)
+        return out
 
     def estimate(self, frame, feats, map_idx, kp_idx, T_init) -> Estimate:
         cfg = self.paper
