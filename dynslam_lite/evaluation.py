@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from evo.core import lie_algebra, metrics, sync
+from evo.core import geometry as evo_geometry, lie_algebra, metrics, sync
 from evo.core.trajectory import PoseTrajectory3D
 
 from .io import Trajectory
@@ -70,6 +70,9 @@ def to_evo(traj: Trajectory) -> PoseTrajectory3D:
 def ate(gt: Trajectory, est: Trajectory, max_diff: float = 0.02) -> tuple[ErrorStats, int, Trajectory]:
     """Absolute trajectory error after SE(3) alignment (no scale).
 
+    An estimate whose positions have no 3-D extent (Umeyama's covariance is rank-deficient) is
+    aligned by its centroid alone instead of raising.
+
     Returns
     -------
     stats (metres), number of associated poses, the aligned estimate (associated poses only)
@@ -80,7 +83,15 @@ def ate(gt: Trajectory, est: Trajectory, max_diff: float = 0.02) -> tuple[ErrorS
         raise ValueError(f"no estimated pose within {max_diff} s of a ground-truth pose") from None
     if ref.num_poses < 3:
         raise ValueError(f"only {ref.num_poses} poses within {max_diff} s of ground truth")
-    e.align(ref, correct_scale=False)
+    try:
+        e.align(ref, correct_scale=False)
+    except evo_geometry.GeometryException:
+        # an estimate without 3-D extent (e.g. tracking failed on every frame and the poses stand
+        # still): the rotation of the alignment is unobservable, so only the centroids are
+        # aligned; exact for a motionless estimate, an upper bound otherwise
+        shift = np.eye(4)
+        shift[:3, 3] = ref.positions_xyz.mean(axis=0) - e.positions_xyz.mean(axis=0)
+        e.transform(shift)
     ape = metrics.APE(metrics.PoseRelation.translation_part)
     ape.process_data((ref, e))
     aligned = Trajectory(e.timestamps, np.stack(e.poses_se3))

@@ -94,3 +94,14 @@ def test_mask_scores_hand_computed():
     s = MaskScores.of(pred, truth)
     assert (s.precision, s.recall, s.iou) == (0.5, 0.5, pytest.approx(2 / 6))
     assert MaskScores.of(np.zeros((2, 2), bool), np.zeros((2, 2), bool)).iou == 1.0
+
+
+def test_motionless_estimate_is_scored_not_raised():
+    # tracking that failed everywhere leaves every pose at the origin: Umeyama is degenerate,
+    # the centroid alignment gives the spread of the ground truth about its mean
+    t = np.arange(30) / 30.0
+    gt = Trajectory(t, np.stack([se3_exp([0.1 * k, 0.02 * k, 0, 0, 0, 0]) for k in range(30)]))
+    est = Trajectory(t, np.repeat(np.eye(4)[None], 30, axis=0))
+    e = evaluate(gt, est)
+    spread = np.linalg.norm(gt.positions - gt.positions.mean(axis=0), axis=1)
+    assert e.ate.rmse == pytest.approx(np.sqrt(np.mean(spread**2)))

@@ -125,3 +125,19 @@ def test_frontend_reports_failure_on_textureless_frames():
     tf = tr.process(Frame(1, 0.033, blank, depth))
     assert not tf.ok and "matches" in tf.reason
     assert len(tr.trajectory()) == 2
+
+
+def test_first_keyframe_keeps_far_points_and_later_ones_top_up_to_100():
+    rng = np.random.default_rng(6)
+    gray = np.kron((rng.random((60, 80)) * 255).astype(np.uint8), np.ones((8, 8), np.uint8))
+    rgb = np.repeat(gray[:, :, None], 3, axis=2)
+    far = np.full((480, 640), 6.0, np.float32)  # everything beyond max_point_depth_m = 4 m
+    tr = FeatureTracker(CAM)
+    tr.process(Frame(0, 0.0, rgb, far))
+    assert len(tr.map) == int((tr.keyframes[0].feats.z > 0).sum())
+    assert len(tr.map) > 500
+    kf = tr.keyframes[0]
+    n0 = len(tr.map)
+    tr._add_keyframe(1, np.eye(4), kf.feats, np.zeros(0, int), np.zeros(0, int), np.ones(0),
+                     np.zeros(len(kf.feats), bool))
+    assert len(tr.map) - n0 == tr.config.min_new_points

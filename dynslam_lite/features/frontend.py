@@ -53,7 +53,9 @@ class FrontendConfig:
         keyframe's tracked points
     keyframe_max_gap : ... or after this many frames without one
     max_point_depth_m : map points are created from keypoints closer than this (ORB-SLAM2's
-        ThDepth = 40 baselines = 3.2 m)
+        ThDepth = 40 baselines = 3.2 m) ...
+    min_new_points : ... topped up with the nearest farther ones to this many (ORB-SLAM2: 100);
+        the first keyframe takes every keypoint with depth, as ORB-SLAM2's initialisation
     local_map_keyframes : the local map holds the points of this many latest keyframes
     ba_window : keyframes optimised by local bundle adjustment (older observers held fixed);
         0 = no local BA
@@ -71,6 +73,7 @@ class FrontendConfig:
     keyframe_ratio: float = 0.9
     keyframe_max_gap: int = 10
     max_point_depth_m: float = 4.0
+    min_new_points: int = 100
     local_map_keyframes: int = 8
     ba_window: int = 5
     ba_max_nfev: int = 5
@@ -318,8 +321,12 @@ class FeatureTracker:
         good = weights > 0
         point_ids[kp_idx[good]] = map_idx[good]
         w[kp_idx[good]] = weights[good]
-        new = ((point_ids < 0) & (feats.z > 0) & (feats.z < self.config.max_point_depth_m)
-               & ~dynamic)
+        new = (point_ids < 0) & (feats.z > 0) & ~dynamic
+        if self.keyframes:  # close points, topped up with the nearest far ones
+            far = np.flatnonzero(new & (feats.z >= self.config.max_point_depth_m))
+            n_close = int(np.count_nonzero(new)) - far.size
+            keep_far = far[np.argsort(feats.z[far], kind="stable")][: max(0, self.config.min_new_points - n_close)]
+            new[np.setdiff1d(far, keep_far)] = False
         P_c = backproject(self.camera, feats.uv[new, 0], feats.uv[new, 1], feats.z[new])
         point_ids[new] = self.map.add(transform_points(invert(T_c_w), P_c), feats.desc[new])
         self.keyframes.append(Keyframe(index, T_c_w.copy(), feats, point_ids, w))
