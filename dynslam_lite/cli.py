@@ -28,7 +28,8 @@ REPRODUCED = BASELINES + ("depthcluster", "static-orb", "weightedstatic")
 MASKED = ("weightedstatic",)  # methods built on semantic masks (static-orb takes them optionally)
 SYNTHETIC_RUNS = {m: (m, "oracle" if m in MASKED else "none", {}) for m in REPRODUCED}
 REAL_RUNS = {m: (m, "none", {}) for m in REPRODUCED}
-# Paper B's ablation, on the walking scenes only
+# Paper B's ablation, on two walking scenes (the batch's time budget)
+ABLATION_SCENES = ("walking_xyz", "walking_rpy")
 ABLATION_RUNS = {
     "static-orb[oracle]": ("static-orb", "oracle", {}),
     "static-orb[oracle:degraded]": ("static-orb", "oracle:degraded", {}),
@@ -143,6 +144,14 @@ NOTEBOOK_RUNS = {
         "quick": {"frames": 20, "pair": 6, "map_stride": 5},
         "full": {"frames": 150, "pair": 30, "map_stride": 10},
     },
+    "20_weightedstatic_masks_and_geometry": {
+        "quick": {"frames": 20, "pair": 12, "eval_stride": 4},
+        "full": {"frames": 150, "pair": 30, "eval_stride": 5},
+    },
+    "21_weightedstatic_weighted_ba": {
+        "quick": {"frames": 20, "pair": 12},
+        "full": {"frames": 150, "pair": 30},
+    },
 }
 NOTEBOOK_DIR = Path(__file__).resolve().parents[1] / "notebooks"
 
@@ -199,7 +208,7 @@ def cmd_reproduce(a) -> int:
         paths = pool.map(_scene_job, [(str(cache), s, frames, a.seed) for s in scenes])
         for scene, path in zip(scenes, paths):
             print(f"[data] synthetic {scene}: {frames} frames at {path}", flush=True)
-            runs = dict(SYNTHETIC_RUNS, **(ABLATION_RUNS if scene.startswith("walking") else {}))
+            runs = dict(SYNTHETIC_RUNS, **(ABLATION_RUNS if scene in ABLATION_SCENES else {}))
             jobs += [(f"synthetic/{scene}", path, None, None, run) for run in runs.items()]
         for d in a.data or []:
             jobs += [(f"real/{Path(d).resolve().name}", d, None, None, run) for run in REAL_RUNS.items()]

@@ -113,13 +113,18 @@ def rpe_pairs(est_stamps: np.ndarray, delta_s: float = 1.0) -> list[tuple[int, i
     return [(i, int(jj)) for i, jj in enumerate(j) if jj != len(stamps) - 1]
 
 
-def rpe(gt: Trajectory, est: Trajectory, delta_s: float = 1.0) -> tuple[ErrorStats, ErrorStats]:
-    """Relative pose error over ``delta_s`` seconds: translation (m) and rotation (deg) stats."""
+def rpe_errors(gt: Trajectory, est: Trajectory, delta_s: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-pair relative pose errors over ``delta_s`` seconds.
+
+    Returns
+    -------
+    end timestamps of the pairs, translation errors (m), rotation errors (deg)
+    """
     if len(est) < 2 or len(gt) < 2:
         raise ValueError("RPE needs at least two poses in both trajectories")
     gt_dt = np.median(np.diff(gt.timestamps))
     max_gap = 2.0 * gt_dt
-    trans, rot = [], []
+    stamps, trans, rot = [], [], []
     for i, j in rpe_pairs(est.timestamps, delta_s):
         gi, gj = _closest(gt.timestamps, est.timestamps[[i, j]])
         if (abs(gt.timestamps[gi] - est.timestamps[i]) > max_gap
@@ -128,9 +133,16 @@ def rpe(gt: Trajectory, est: Trajectory, delta_s: float = 1.0) -> tuple[ErrorSta
         d_est = lie_algebra.relative_se3(est.poses[i], est.poses[j])
         d_gt = lie_algebra.relative_se3(gt.poses[gi], gt.poses[gj])
         E = lie_algebra.relative_se3(d_gt, d_est)
+        stamps.append(est.timestamps[j])
         trans.append(np.linalg.norm(E[:3, 3]))
         rot.append(np.degrees(lie_algebra.so3_log_angle(E[:3, :3])))
-    return ErrorStats.of(np.array(trans)), ErrorStats.of(np.array(rot))
+    return np.array(stamps), np.array(trans), np.array(rot)
+
+
+def rpe(gt: Trajectory, est: Trajectory, delta_s: float = 1.0) -> tuple[ErrorStats, ErrorStats]:
+    """Relative pose error over ``delta_s`` seconds: translation (m) and rotation (deg) stats."""
+    _, trans, rot = rpe_errors(gt, est, delta_s)
+    return ErrorStats.of(trans), ErrorStats.of(rot)
 
 
 def evaluate(gt: Trajectory, est: Trajectory, max_diff: float = 0.02, delta_s: float = 1.0) -> TrajectoryErrors:

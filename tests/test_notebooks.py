@@ -10,12 +10,19 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 TINY = {
     "10_depthcluster_clustering_and_masks": {"frames": 8, "pair": 3, "real_pair": 3, "eval_frames": 5},
     "11_depthcluster_iterations": {"frames": 10, "pair": 4, "map_stride": 4},
+    "20_weightedstatic_masks_and_geometry": {"frames": 12, "pair": 8, "eval_stride": 3},
+    "21_weightedstatic_weighted_ba": {"frames": 12, "pair": 8},
 }
 FIGURES = {
     "10_depthcluster_clustering_and_masks": ["A_fig2_depth_clustering.png", "A_blocks.png",
                                              "A_fig7_removal_synthetic.png"],
     "11_depthcluster_iterations": ["A_fig6_iterations.png", "A_fig6_convergence.png",
                                    "A_fig8_ate.png", "A_fig9_map.png"],
+    "20_weightedstatic_masks_and_geometry": ["B_fig7_semantic_static_points.png",
+                                             "B_fig4_epipolar_line_motion.png",
+                                             "B_fig5_dynamic_points.png", "B_sigma_sweep.png"],
+    "21_weightedstatic_weighted_ba": ["B_weights_before_after.png", "B_lm_cost.png",
+                                      "B_fig6_trajectory.png"],
 }
 
 

@@ -40,6 +40,7 @@ def test_weighted_test_catches_motion_along_the_epipolar_line():
     assert np.all(d[:4] < 1e-6) and d[4] > 5  # plain epipolar test misses the point sliding along
     assert test.dynamic.tolist() == [False, False, False, True, True]
     assert test.cos[3] < 1e-9 and test.depth_change[3] > 0.2
+    assert test.off_line.tolist() == [False, False, False, False, True]  # = the plain test
     # without any depth, the off-line point is still dynamic through the epipolar term alone
     no_depth = weighted_geometric_test(CAM, R, t, uv_ref, np.zeros(5), uv_cur, np.zeros(5))
     assert no_depth.dynamic.tolist() == [False, False, False, False, True]

@@ -70,12 +70,14 @@ class GeometricTest:
     cos : (N,) |cos(n, K^-1 p2)|, nan where the baseline is too short
     depth_change : (N,) |z - z'| / z', nan where a depth is missing
     delta : (N,) the score; dynamic : (N,) bool, delta >= sigma2
+    off_line : (N,) bool, cos > sigma1: the plain epipolar test's verdict (no depth term)
     """
 
     cos: np.ndarray
     depth_change: np.ndarray
     delta: np.ndarray
     dynamic: np.ndarray
+    off_line: np.ndarray
 
 
 def weighted_geometric_test(camera: PinholeCamera, R: np.ndarray, t: np.ndarray, uv_ref: np.ndarray,
@@ -106,4 +108,4 @@ def weighted_geometric_test(camera: PinholeCamera, R: np.ndarray, t: np.ndarray,
     off_line = np.nan_to_num(cos) > cfg.sigma1
     alpha = np.where(off_line, cfg.sigma2 / cfg.sigma1, 0.0)
     delta = alpha * np.nan_to_num(cos) + np.nan_to_num(dz)
-    return GeometricTest(cos, dz, delta, delta >= cfg.sigma2)
+    return GeometricTest(cos, dz, delta, delta >= cfg.sigma2, off_line)
