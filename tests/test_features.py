@@ -3,6 +3,7 @@ the whole frontend (static-orb) on a synthetic static scene with ground truth.""
 import numpy as np
 import pytest
 
+from conftest import FR2_DESK, need
 from dynslam_lite.evaluation import evaluate
 from dynslam_lite.features import (FeatureTracker, Observations, extract, local_bundle_adjustment,
                                    optimize_pose, search_by_projection)
@@ -112,6 +113,13 @@ def test_static_orb_tracks_static_scene_below_2cm(scene):
     e = evaluate(seq.groundtruth, r.trajectory)
     assert len(r.trajectory) == len(seq) and not r.failed_frames
     assert e.ate.rmse < 0.02, e.ate.rmse
+
+
+def test_static_orb_on_real_fr2_desk_below_2cm():
+    seq = open_sequence(need(FR2_DESK))  # real, static: the frontend on a real sensor
+    r = run_method("static-orb", seq)
+    e = evaluate(seq.groundtruth, r.trajectory)
+    assert not r.failed_frames and e.ate.rmse < 0.02, e.ate.rmse
 
 
 def test_frontend_reports_failure_on_textureless_frames():
