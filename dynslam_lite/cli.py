@@ -27,7 +27,10 @@ REPRODUCED = BASELINES + ("depthcluster", "static-orb", "weightedstatic")
 # masks; real data has no ground-truth masks.
 MASKED = ("weightedstatic",)  # methods built on semantic masks (static-orb takes them optionally)
 SYNTHETIC_RUNS = {m: (m, "oracle" if m in MASKED else "none", {}) for m in REPRODUCED}
-REAL_RUNS = {m: (m, "none", {}) for m in REPRODUCED}
+# real data: the bundled person model (a stand-in for the papers' networks), and without masks
+REAL_RUNS = {m: (m, "person" if m in MASKED else "none", {}) for m in REPRODUCED}
+REAL_RUNS.update({"static-orb[person]": ("static-orb", "person", {}),
+                  "weightedstatic[none]": ("weightedstatic", "none", {})})
 # Paper B's ablation, on two walking scenes (the batch's time budget)
 ABLATION_SCENES = ("walking_xyz", "walking_rpy")
 ABLATION_RUNS = {
@@ -113,7 +116,7 @@ def cmd_bench(a) -> int:
         seq = open_sequence(path.path)
     print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s} {'frames':>7s}")
     for method in a.methods:
-        masks = (a.masks or ("none" if a.seq else "oracle")) if method in MASKED else "none"
+        masks = (a.masks or ("person" if a.seq else "oracle")) if method in MASKED else "none"
         r = run_method(method, seq, masks=masks)
         if masks != "none":
             print(f"{method:18s} (masks {masks})")
@@ -145,7 +148,7 @@ NOTEBOOK_RUNS = {
         "full": {"frames": 150, "pair": 30, "map_stride": 10},
     },
     "20_weightedstatic_masks_and_geometry": {
-        "quick": {"frames": 20, "pair": 12, "eval_stride": 4},
+        "quick": {"frames": 20, "pair": 12, "eval_stride": 4, "real_stride": 20},
         "full": {"frames": 150, "pair": 30, "eval_stride": 5},
     },
     "21_weightedstatic_weighted_ba": {
@@ -299,7 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--stats", help="write run statistics (JSON) here")
     r.add_argument("--masks", default="none",
                    help="semantic masks for methods that use them: none, oracle, oracle:degraded, "
-                        "files:DIR (see dynslam_lite/masks.py)")
+                        "files:DIR, person, person:landscape, onnx:PATH (see dynslam_lite/masks.py)")
     r.add_argument("--quiet", action="store_true")
     r.set_defaults(func=cmd_run)
 
@@ -321,7 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--cache", default=str(DEFAULT_CACHE))
     b.add_argument("--masks", default=None,
                    help="mask source of weightedstatic (default: oracle on the synthetic scene, "
-                        "none on --seq)")
+                        "person on --seq)")
     b.set_defaults(func=cmd_bench)
 
     rp = sub.add_parser("reproduce", help="batch reproduction into reports/")

@@ -11,7 +11,11 @@ a source is chosen by a spec string (``--masks`` on the command line, ``masks`` 
   machine), one per colour frame, named by its timestamp as in TUM's ``rgb/`` folder
   (``1311868164.363181.png``; the nearest within 0.02 s is used). 8- or 16-bit, 0 = background,
   each instance a distinct non-zero value; a 0/255 binary mask is split into connected
-  components. A frame without a file has no masks.
+  components. A frame without a file has no masks;
+* ``person`` — the bundled MediaPipe Selfie Segmentation model run with OpenCV
+  (:mod:`dynslam_lite.segmentation`), a stand-in for the papers' networks; ``person:landscape``
+  uses its 256x144 variant;
+* ``onnx:PATH`` — a YOLOv5-seg / YOLOv8-seg ONNX export of your own, person class only.
 """
 from __future__ import annotations
 
@@ -24,10 +28,56 @@ import numpy as np
 from .io import Frame, SequenceError
 
 
-def split_instances(mask: np.ndarray, min_area: int = 50) -> list[np.ndarray]:
-    """Instances of a binary mask: 8-connected components of at least ``min_area`` pixels."""
-    n, cc, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
-    return [cc == i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area]
+def depth_edges(depth: np.ndarray, jump: float = 0.1) -> np.ndarray:
+    """(H, W) bool: the far side of every depth discontinuity, i.e. pixels whose 4-neighbour is
+    nearer by more than ``jump`` x its depth; missing depth (0) makes no edge."""
+    d = depth.astype(np.float32)
+    edge = np.zeros(d.shape, bool)
+    for axis in (0, 1):
+        a = d[1:] if axis == 0 else d[:, 1:]  # each pixel and its up / left neighbour
+        b = d[:-1] if axis == 0 else d[:, :-1]
+        near = np.minimum(a, b)
+        jumps = (near > 0) & (np.abs(a - b) > jump * near)
+        far_a, far_b = jumps & (a > b), jumps & (b > a)
+        if axis == 0:
+            edge[1:] |= far_a
+            edge[:-1] |= far_b
+        else:
+            edge[:, 1:] |= far_a
+            edge[:, :-1] |= far_b
+    return edge
+
+
+def split_instances(mask: np.ndarray, min_area: int = 50, depth: np.ndarray | None = None,
+                    depth_jump: float = 0.1) -> list[np.ndarray]:
+    """Instances of a binary mask: connected components of at least ``min_area`` pixels.
+
+    With ``depth``, the mask is first cut along depth discontinuities (:func:`depth_edges`), so
+    two people overlapping in the image at different distances become two instances; each cut
+    pixel is then given to the adjacent instance whose mean depth is closest to its own.
+    """
+    mask = mask.astype(bool)
+    core = mask & ~depth_edges(depth, depth_jump) if depth is not None else mask
+    # 4-connected after a cut: the one-pixel cut (4-neighbour jumps) leaks diagonally otherwise
+    n, cc, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8),
+                                                       connectivity=8 if depth is None else 4)
+    keep = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area]
+    if depth is not None and keep:
+        lut = np.zeros(n, np.int32)
+        lut[keep] = keep
+        cc = lut[cc]  # small components dropped
+        mean = np.bincount(cc.ravel(), depth.ravel(), n) / np.maximum(np.bincount(cc.ravel(), None, n), 1)
+        pad = np.pad(cc, 1)
+        for _ in range(3):  # cuts are one pixel wide; a few rounds fill corners
+            ys, xs = np.nonzero(mask & (pad[1:-1, 1:-1] == 0))
+            if ys.size == 0:
+                break
+            nb = np.stack([pad[ys + 1 + dy, xs + 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], 1)
+            cost = np.where(nb > 0, np.abs(depth[ys, xs, None] - mean[nb]), np.inf)
+            best = nb[np.arange(len(ys)), np.argmin(cost, axis=1)]
+            pad[ys + 1, xs + 1] = best  # 0 where no labelled neighbour yet
+        cc = pad[1:-1, 1:-1]
+    return [cc == i for i in keep]
 
 
 def union(masks: list[np.ndarray]) -> np.ndarray | None:
@@ -132,8 +182,11 @@ class FileMasks:
         return [img == i for i in ids]
 
 
+SOURCES = "none, oracle, oracle:degraded, files:DIR, person, person:landscape or onnx:PATH"
+
+
 def make_mask_source(spec: str):
-    """A mask source from its spec: ``none``, ``oracle``, ``oracle:degraded``, ``files:DIR``."""
+    """A mask source from its spec (see the module docstring)."""
     kind, _, arg = spec.partition(":")
     if kind == "none" and not arg:
         return NoMasks()
@@ -141,4 +194,10 @@ def make_mask_source(spec: str):
         return OracleMasks(Degradation() if arg else None)
     if kind == "files" and arg:
         return FileMasks(arg)
-    raise ValueError(f"unknown mask source {spec!r}: use none, oracle, oracle:degraded or files:DIR")
+    if kind == "person" and arg in ("", "square", "landscape"):
+        from .segmentation import PersonMasks
+        return PersonMasks(arg or "square")
+    if kind == "onnx" and arg:
+        from .segmentation import YoloSegMasks
+        return YoloSegMasks(arg)
+    raise ValueError(f"unknown mask source {spec!r}: use {SOURCES}")

@@ -10,7 +10,7 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 TINY = {
     "10_depthcluster_clustering_and_masks": {"frames": 8, "pair": 3, "real_pair": 3, "eval_frames": 5},
     "11_depthcluster_iterations": {"frames": 10, "pair": 4, "map_stride": 4},
-    "20_weightedstatic_masks_and_geometry": {"frames": 12, "pair": 8, "eval_stride": 3},
+    "20_weightedstatic_masks_and_geometry": {"frames": 12, "pair": 8, "eval_stride": 3, "real_stride": 30},
     "21_weightedstatic_weighted_ba": {"frames": 12, "pair": 8},
 }
 FIGURES = {
