@@ -19,6 +19,7 @@ import numpy as np
 
 from .geometry import invert
 from .io import Frame, RGBDSequence, Trajectory
+from .bgrestore import BgRestoreMethod
 from .depthcluster import DepthClusterMethod
 from .features.method import StaticORBMethod
 from .masks import make_mask_source
@@ -118,7 +119,7 @@ class OpenCVMethod:
 
 METHODS: dict[str, type] = {
     m.name: m for m in (StaticDense, OpenCVMethod, DepthClusterMethod, StaticORBMethod,
-                        WeightedStaticMethod)
+                        WeightedStaticMethod, BgRestoreMethod)
 }
 
 

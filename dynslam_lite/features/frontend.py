@@ -182,10 +182,12 @@ class FeatureTracker:
         self.frames_since_kf = 0
 
     # ------------------------------------------------------------------ per frame
-    def process(self, frame, exclude: np.ndarray | None = None, timer=None) -> TrackedFrame:
+    def process(self, frame, exclude: np.ndarray | None = None, timer=None,
+                T_init: np.ndarray | None = None) -> TrackedFrame:
         """Track one frame (a :class:`dynslam_lite.io.Frame`); failures are reported, not raised.
 
         ``exclude``: (H, W) bool, keypoints inside are dropped (semantic masks).
+        ``T_init``: world-to-camera start of the search (default: the constant-velocity prediction).
         """
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("orb"):
@@ -196,25 +198,12 @@ class FeatureTracker:
             self._record(np.eye(4))
             return TrackedFrame(frame.index, feats, np.zeros(0, int), np.zeros(0, int), None, True,
                                 keyframe=True)
-        T_pred = self._predict()
-        with stage("match"):
-            local = self._local_points()
-            mi, ki, T_pred = self._search(local, feats, T_pred, self.config.search_radius_px, True)
-        if len(mi) < self.config.min_inliers:
+        T_pred = self.predict() if T_init is None else T_init
+        mi, ki, est, T_pred, reason = self.locate(frame, feats, T_pred, timer)
+        if est is None or reason:
             self._record(T_pred)
-            return TrackedFrame(frame.index, feats, mi, ki, None, False,
-                                f"{len(mi)} matches to the local map (need {self.config.min_inliers})")
-        with stage("pose"):
-            est = self.estimate(frame, feats, mi, ki, T_pred)
-        with stage("match"):
-            mi, ki, _ = self._search(local, feats, est.T_c_w, self.config.refine_radius_px, False)
-        with stage("pose"):
-            est = self.estimate(frame, feats, mi, ki, est.T_c_w)
+            return TrackedFrame(frame.index, feats, mi, ki, est, False, reason)
         n_in = int(est.inliers.sum())
-        if n_in < self.config.min_inliers:
-            self._record(T_pred)
-            return TrackedFrame(frame.index, feats, mi, ki, est, False,
-                                f"{n_in} inlier matches (need {self.config.min_inliers})")
         self.map.found[mi[est.inliers]] += 1
         self.frames_since_kf += 1
         is_kf = (n_in < self.config.keyframe_ratio * self.last_tracked
@@ -231,6 +220,31 @@ class FeatureTracker:
             T = est.T_c_w
         self._record(T)
         return TrackedFrame(frame.index, feats, mi, ki, est, True, keyframe=is_kf)
+
+    def locate(self, frame, feats: Features, T_init: np.ndarray, timer=None, count: bool = True):
+        """Pose of ``feats`` against the local map: search by projection from ``T_init``, pose,
+        search again in a narrow window, pose. Changes no map or keyframe; ``count`` = False
+        also leaves the points' visibility counts alone (a trial pose).
+
+        Returns (map indices, keypoint indices, Estimate or None, the start pose used, failure
+        reason or '').
+        """
+        stage = timer.stage if timer else (lambda name: nullcontext())
+        with stage("match"):
+            local = self._local_points()
+            mi, ki, T_init = self._search(local, feats, T_init, self.config.search_radius_px, True, count)
+        if len(mi) < self.config.min_inliers:
+            return mi, ki, None, T_init, f"{len(mi)} matches to the local map (need {self.config.min_inliers})"
+        with stage("pose"):
+            est = self.estimate(frame, feats, mi, ki, T_init)
+        with stage("match"):
+            mi, ki, _ = self._search(local, feats, est.T_c_w, self.config.refine_radius_px, False)
+        with stage("pose"):
+            est = self.estimate(frame, feats, mi, ki, est.T_c_w)
+        n_in = int(est.inliers.sum())
+        if n_in < self.config.min_inliers:
+            return mi, ki, est, T_init, f"{n_in} inlier matches (need {self.config.min_inliers})"
+        return mi, ki, est, T_init, ""
 
     def estimate(self, frame, feats: Features, map_idx: np.ndarray, kp_idx: np.ndarray,
                  T_init: np.ndarray) -> Estimate:
@@ -255,7 +269,8 @@ class FeatureTracker:
         self.frame_ref.append((k, T_c_w @ invert(self.keyframes[k].T_c_w)))
         self.T_before, self.T_last = self.T_last, T_c_w
 
-    def _predict(self) -> np.ndarray:
+    def predict(self) -> np.ndarray:
+        """Constant-velocity prediction of the next pose (world to camera)."""
         if self.T_before is None:
             return self.T_last.copy()
         return normalize_pose(self.T_last @ invert(self.T_before) @ self.T_last)
@@ -273,7 +288,7 @@ class FeatureTracker:
         return uv, inside
 
     def _search(self, local: np.ndarray, feats: Features, T_c_w: np.ndarray, radius: float,
-                first: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                first: bool, count: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Search by projection; on the first search, widen the window and then re-initialise
         the pose by PnP-RANSAC when too few matches are found."""
         cfg = self.config
@@ -288,7 +303,8 @@ class FeatureTracker:
         mi, ki, seen = find(T_c_w, radius)
         if not first:
             return mi, ki, T_c_w
-        self.map.visible[seen] += 1
+        if count:
+            self.map.visible[seen] += 1
         if len(mi) < 2 * cfg.min_inliers:
             mi, ki, _ = find(T_c_w, 4 * radius)
         if len(mi) >= 2 * cfg.min_inliers:

@@ -1,0 +1,139 @@
+"""Paper C's method ``bgrestore`` on the shared feature frontend.
+
+Per frame:
+
+1. instance masks from the mask source; ORB matches with the previous frame, F by RANSAC, each
+   instance removed or kept by the epipolar distances of its points (:mod:`.removal`);
+2. a trial pose from the keypoints outside the removed region (the frontend's search and pose
+   steps, nothing recorded), then the removed region restored from the latest 20 keyframes (their
+   restored colour and depth) at that pose (:mod:`.inpaint`);
+3. depth left unrestored filled by region growing with 3-class Otsu thresholds (:mod:`.depthfill`);
+4. tracking on the restored frame: keypoints anywhere except the part of the removed region no
+   keyframe could restore. A new keyframe keeps its restored images for later restorations.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..features import FeatureTracker, FrontendConfig, extract
+from ..features.method import FrontendMethod
+from ..geometry import invert
+from .depthfill import fill_depth_hole
+from .inpaint import KeyframeImage, restore_from_keyframes
+from .removal import RemovalConfig, at, decide_removal
+
+
+@dataclass
+class BgRestoreConfig:
+    """Parameters of paper C (the paper's values where it gives them).
+
+    Attributes
+    ----------
+    frontend : the shared feature frontend, see :class:`FrontendConfig`
+    removal : semantic + epipolar removal, see :class:`RemovalConfig`
+    keyframes : number of latest keyframes mapped into the holes (20)
+    restore : False skips steps 2-3 (removal only: ablation)
+    fill_depth : False skips the region growing (step 3)
+    depth_z_max : metres mapped to grey 255 for the region growing (8-bit depth, Td = 6)
+    region_td : the growth step threshold Td on the 8-bit scale (6)
+    """
+
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    removal: RemovalConfig = field(default_factory=RemovalConfig)
+    keyframes: int = 20
+    restore: bool = True
+    fill_depth: bool = True
+    depth_z_max: float = 8.0
+    region_td: int = 6
+
+
+@dataclass
+class FrameRestoration:
+    """What happened to one frame (kept for notebooks and scores).
+
+    Attributes
+    ----------
+    removed : (H, W) bool, the dilated removed instances
+    restored : (H, W) bool, removed pixels restored from keyframes
+    grown : (H, W) bool, removed pixels whose depth came from region growing
+    rgb, depth : the restored frame
+    """
+
+    removed: np.ndarray
+    restored: np.ndarray
+    grown: np.ndarray
+    rgb: np.ndarray
+    depth: np.ndarray
+
+
+class BgRestoreMethod(FrontendMethod):
+    """Method ``bgrestore``; ``extras`` reports how much of the removed area was restored."""
+
+    name = "bgrestore"
+    config_type = BgRestoreConfig
+
+    def __init__(self, camera, config: BgRestoreConfig, masks=None, keep_frames: bool = False):
+        super().__init__(camera, config.frontend, masks)
+        self.config = config
+        self.camera = camera
+        self.past_feats: deque = deque(maxlen=max(config.removal.frame_gap, 1))
+        self.kf_images: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.keep_frames = keep_frames
+        self.restorations: list[FrameRestoration] = []  # per frame when keep_frames
+        self.area = np.zeros(3)  # removed, restored, grown pixels over the run
+
+    def _keyframe_images(self) -> list[KeyframeImage]:
+        kfs = self.tracker.keyframes
+        ids = [k for k in range(max(0, len(kfs) - self.config.keyframes), len(kfs)) if k in self.kf_images]
+        return [KeyframeImage(*self.kf_images[k][:2], invert(kfs[k].T_c_w), self.kf_images[k][2]) for k in ids]
+
+    def _process(self, frame, timer):
+        cfg = self.config
+        with timer.stage("masks"):
+            instances = self.masks(frame)
+        with timer.stage("removal"):
+            feats = extract(frame.gray, frame.depth, cfg.frontend.orb)
+            prev = self.past_feats[0] if self.past_feats else None  # frame_gap frames back
+            removal = decide_removal(instances, prev, feats, frame.depth.shape, cfg.removal)
+            self.past_feats.append(feats)
+        hole = removal.mask
+        restored = np.zeros_like(hole)
+        grown = np.zeros_like(hole)
+        rgb, depth = frame.rgb, frame.depth
+        T_init = None
+        if cfg.restore and hole.any() and self.tracker.keyframes:
+            # a trial pose from the keypoints outside the hole places the keyframes' pixels
+            static = feats.subset(~at(hole, feats.uv))
+            _, _, est, _, reason = self.tracker.locate(frame, static, self.tracker.predict(), timer,
+                                                       count=False)
+            T_init = est.T_c_w if est is not None and not reason else self.tracker.predict()
+            with timer.stage("inpaint"):
+                res = restore_from_keyframes(self.camera, rgb, depth, hole, invert(T_init),
+                                             self._keyframe_images())
+                rgb, depth, restored = res.rgb, res.depth, res.filled
+            if cfg.fill_depth and (hole & ~restored).any():
+                with timer.stage("depth_fill"):
+                    fill = fill_depth_hole(np.where(restored, depth, frame.depth), hole & ~restored,
+                                           cfg.depth_z_max, cfg.region_td)
+                    depth, grown = fill.depth, fill.filled
+        left = hole & ~restored  # no keyframe saw behind: no keypoints there
+        depth = np.where(hole & ~restored & ~grown, 0.0, depth).astype(np.float32)
+        tf = self.tracker.process(replace(frame, rgb=rgb, depth=depth), left, timer, T_init)
+        if tf.keyframe:
+            self.kf_images[len(self.tracker.keyframes) - 1] = (rgb, depth, left)
+        self.area += [hole.sum(), restored.sum(), grown.sum()]
+        if self.keep_frames:
+            self.restorations.append(FrameRestoration(hole, restored, grown, rgb, depth))
+        self.frames.append(tf)
+        return tf
+
+    def extras(self) -> dict:
+        out = super().extras()
+        if self.area[0]:
+            out["removed_px_per_frame"] = float(self.area[0] / max(len(self.frames), 1))
+            out["restored_fraction"] = float(self.area[1] / self.area[0])
+            out["depth_grown_fraction"] = float(self.area[2] / self.area[0])
+        return out

@@ -1,0 +1,167 @@
+"""Paper C: 3-class Otsu against brute force, region growing and depth filling against hand
+computation, the eq. 8 splat, instance removal on constructed matches, restoration against the
+true background, and the method on a synthetic walking clip."""
+import cv2
+import numpy as np
+import pytest
+
+from dynslam_lite.bgrestore import (KeyframeImage, RemovalConfig, decide_removal, fill_depth_hole,
+                                    grow_region, otsu3, restore_from_keyframes, splat)
+from dynslam_lite.bgrestore.depthfill import flood_region
+from dynslam_lite.evaluation import evaluate
+from dynslam_lite.features import Features
+from dynslam_lite.geometry import PinholeCamera, project, se3_exp
+from dynslam_lite.io import open_sequence
+from dynslam_lite.pipeline import run_method
+from dynslam_lite.synth.generator import T0, SceneRenderer, _timestamps
+
+
+def _between_class_variance(hist, t0, t1):
+    """Eqs. 10-12 written out per class (the between-class form), a reference for otsu3."""
+    p = hist / hist.sum()
+    v = np.arange(len(p))
+    m = (v * p).sum()
+    out = 0.0
+    for lo, hi in ((0, t0), (t0, t1), (t1, len(p))):
+        w = p[lo:hi].sum()
+        if w > 0:
+            out += w * ((v[lo:hi] * p[lo:hi]).sum() / w - m) ** 2
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_otsu3_equals_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    hist = rng.integers(0, 60, 40).astype(float)
+    hist[rng.integers(0, 40, 8)] = 0
+    best = max(((a, b) for a in range(1, 39) for b in range(a + 1, 40)),
+               key=lambda ab: _between_class_variance(hist, *ab))
+    t0, t1 = otsu3(hist)
+    assert _between_class_variance(hist, t0, t1) == pytest.approx(_between_class_variance(hist, *best), rel=1e-12)
+    assert (t0, t1) == best
+
+
+def test_otsu3_separates_three_depth_layers():
+    hist = np.zeros(256)
+    hist[[30, 100, 200]] = [15, 10, 15]
+    assert otsu3(hist) == (31, 101)  # the first pair that separates the three spikes
+
+
+GRID = np.array([[10, 40, 41, 90, 90],
+                 [10, 39, 38, 90, 50],
+                 [36, 42, 40, 47, 44],
+                 [10, 10, 45, 10, 43],
+                 [90, 90, 90, 44, 10]], np.uint8)
+
+
+def test_region_growing_steps_as_hand_computed():
+    steps = grow_region(GRID, (2, 2), t0=37, t1=46, td=6)
+    got = [sorted(map(tuple, np.argwhere(s))) for s in steps]
+    assert got == [[(2, 2)], [(1, 1), (1, 2), (2, 1), (3, 2)], [(0, 1), (0, 2), (4, 3)], [(3, 4)], [(2, 4)]]
+    # 36 is below T0, 47 at or above T1, 50 a step of 6 from 44 but out of range
+    allowed = (GRID >= 37) & (GRID < 46)
+    assert np.array_equal(np.logical_or.reduce(steps), flood_region(GRID, (2, 2), 6, allowed))
+
+
+def test_depth_hole_filled_from_the_restorable_class_as_hand_computed():
+    wall = np.array([98, 100, 102, 104, 106], np.float32)  # class C1, steps of 2 <= Td
+    depth = np.zeros((5, 8), np.float32)
+    depth[:, :2] = wall[:, None]
+    depth[:, 2:5] = 30  # the person (class C0): the hole
+    depth[:, 5:] = 200  # far background (class C2), also touching the hole
+    hole = np.zeros(depth.shape, bool)
+    hole[:, 2:5] = True
+    r = fill_depth_hole(depth, hole, z_max=255.0)  # grey value = depth value
+    assert r.thresholds == (31, 107) and r.seeds == [(2, 1)] and r.filled.sum() == 15
+    col2 = [99, 100, 102, 104, 105]  # mean of the wall neighbours (rows r-1..r+1)
+    col3 = [(99 + 100) / 2, (99 + 100 + 102) / 3, 102, (102 + 104 + 105) / 3, (104 + 105) / 2]
+    col4 = [np.mean(col3[max(i - 1, 0):i + 2]) for i in range(5)]
+    np.testing.assert_allclose(r.depth[:, 2], col2, atol=0.01)  # 1/255 of the 8-bit scale, rounding
+    np.testing.assert_allclose(r.depth[:, 3], col3, atol=0.01)
+    np.testing.assert_allclose(r.depth[:, 4], col4, atol=0.01)
+    assert np.array_equal(r.depth[:, 5:], depth[:, 5:])  # never from the far class
+
+
+def test_splat_weights_are_unit_square_overlaps():
+    hole = np.ones((30, 30), bool)
+    x, y = np.array([10.3]), np.array([20.6])
+    acc, w = splat(x, y, np.array([[100.0]]), hole)
+    for (xc, yc) in ((10, 20), (11, 20), (10, 21), (11, 21)):  # eq. 8 written out
+        area = ((min(x[0] + 0.5, xc + 0.5) - max(x[0] - 0.5, xc - 0.5))
+                * (min(y[0] + 0.5, yc + 0.5) - max(y[0] - 0.5, yc - 0.5)))
+        assert w[yc, xc] == pytest.approx(area) and acc[yc, xc, 0] == pytest.approx(100 * area)
+    assert w.sum() == pytest.approx(1.0)
+    hole[21, :] = False  # centres outside the hole receive nothing
+    _, w = splat(x, y, np.array([[100.0]]), hole)
+    assert w.sum() == pytest.approx(0.28 + 0.12)
+
+
+CAM = PinholeCamera(525.0, 525.0, 319.5, 239.5, 640, 480)
+
+
+def test_instance_with_moving_points_is_removed_and_the_still_one_kept():
+    rng = np.random.default_rng(3)
+    P = np.column_stack([rng.uniform(-2, 2, 600), rng.uniform(-1.5, 1.5, 600), rng.uniform(2, 5, 600)])
+    T = se3_exp([0.06, 0.01, 0.02, 0.01, -0.02, 0.0])  # current <- previous camera
+    uv_prev = np.column_stack(project(CAM, P))
+    P_cur = P @ T[:3, :3].T + T[:3, 3]
+    uv_cur = np.column_stack(project(CAM, P_cur))
+    box_a = (uv_cur[:, 0] > 100) & (uv_cur[:, 0] < 220) & (uv_cur[:, 1] > 100) & (uv_cur[:, 1] < 380)
+    box_b = (uv_cur[:, 0] > 420) & (uv_cur[:, 0] < 540) & (uv_cur[:, 1] > 100) & (uv_cur[:, 1] < 380)
+    moved = P_cur.copy()
+    moved[box_a] += [0.0, 0.08, 0.0]  # person A walked 8 cm (off the epipolar lines); B stood still
+    uv_cur = np.column_stack(project(CAM, moved)) + rng.normal(0, 0.2, (600, 2))
+    desc = rng.integers(0, 256, (600, 32), dtype=np.uint8)
+
+    def feats(uv):
+        return Features(uv, np.zeros(600, int), desc, np.ones(600), np.ones(600))
+
+    masks = []
+    for box in (box_a, box_b):
+        m = np.zeros((480, 640), np.uint8)
+        x0, y0 = np.floor(uv_cur[box].min(axis=0)).astype(int) - 3
+        x1, y1 = np.ceil(uv_cur[box].max(axis=0)).astype(int) + 3
+        m[y0:y1, x0:x1] = 1
+        masks.append(m > 0)
+    r = decide_removal(masks, feats(uv_prev), feats(uv_cur), (480, 640), RemovalConfig(dilate_px=5))
+    assert r.removed == [True, False], r.votes
+    dyn_a, n_a = r.votes[0]
+    assert n_a >= box_a.sum() and dyn_a > 0.8 * n_a and r.votes[1][0] < 0.1 * r.votes[1][1]
+    assert r.mask[masks[0]].all() and not r.mask[masks[1] & ~cv2.dilate(masks[0].astype(np.uint8), np.ones((13, 13))).astype(bool)].any()
+
+
+def test_restoration_recovers_the_true_background_better_than_telea():
+    r = SceneRenderer("walking_xyz", 0)
+    t, _ = _timestamps(40, 0)
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
+
+    def frame(i, people=True):
+        rgb, d, m = r.frame(i, t[i] - T0, people)
+        return rgb, d, cv2.dilate(m.astype(np.uint8), k) > 0, r.pose(t[i] - T0)
+
+    kfs = []
+    for i in (0, 10, 20, 30):
+        kf_rgb, kf_depth, kf_hole, kf_T = frame(i)
+        kfs.append(KeyframeImage(kf_rgb, kf_depth, kf_T, invalid=kf_hole))
+    rgb, depth, hole, T = frame(38)
+    bg, bg_depth, _, _ = frame(38, people=False)
+    res = restore_from_keyframes(r.camera, rgb, depth, hole, T, kfs)
+    assert res.filled.mean() > 0 and res.filled.sum() > 0.6 * hole.sum()
+    assert np.array_equal(res.rgb[~hole], rgb[~hole])  # only the hole is touched
+
+    def psnr(img, m):
+        return 10 * np.log10(255.0**2 / np.mean((img[m].astype(float) - bg[m].astype(float)) ** 2))
+
+    telea = cv2.inpaint(rgb, hole.astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    ours, theirs = psnr(res.rgb, res.filled), psnr(telea, res.filled)
+    assert ours > 25 and ours > theirs + 6, (ours, theirs)  # measured 27.4 vs 18.2 dB
+    ok = res.filled & (bg_depth > 0)
+    assert np.median(np.abs(res.depth[ok] - bg_depth[ok])) < 0.03
+
+
+@pytest.mark.slow
+def test_bgrestore_beats_static_orb_on_walking(scene):
+    seq = open_sequence(scene("walking_xyz", 60))
+    e = {m: evaluate(seq.groundtruth, run_method(m, seq, masks=masks).trajectory).ate.rmse
+         for m, masks in (("static-orb", "none"), ("bgrestore", "oracle"))}
+    assert e["bgrestore"] < e["static-orb"] / 5, e
