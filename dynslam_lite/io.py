@@ -379,6 +379,13 @@ class RGBDSequence:
             return None
         return load_rgb(self.background_files[i])
 
+    def background_depth(self, i: int) -> np.ndarray | None:
+        """(H, W) float32 metres of frame i without moving objects (synthetic, ``background_depth/``)."""
+        if self.background_files is None or self.background_files[i] is None:
+            return None
+        path = self.background_files[i].parent.parent / "background_depth" / self.background_files[i].name
+        return load_depth(path, self.camera.depth_scale) if path.is_file() else None
+
     def window(self, start: int = 0, count: int | None = None) -> "RGBDSequence":
         """Sub-sequence of ``count`` frames from ``start`` (all remaining when None)."""
         if start < 0 or start >= len(self):

@@ -28,6 +28,16 @@ import numpy as np
 from .io import Frame, SequenceError
 
 
+def disk(r: int) -> np.ndarray:
+    """Elliptic structuring element of radius ``r`` pixels."""
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def dilate(mask: np.ndarray, r: int) -> np.ndarray:
+    """(H, W) bool mask dilated by a disk of radius ``r`` (unchanged for r <= 0)."""
+    return cv2.dilate(mask.astype(np.uint8), disk(r)) > 0 if r > 0 else mask.astype(bool)
+
+
 def depth_edges(depth: np.ndarray, jump: float = 0.1) -> np.ndarray:
     """(H, W) bool: the far side of every depth discontinuity, i.e. pixels whose 4-neighbour is
     nearer by more than ``jump`` x its depth; missing depth (0) makes no edge."""
@@ -126,9 +136,8 @@ class OracleMasks:
             if rng.random() < d.drop_rate:
                 continue
             k = int(rng.integers(-d.max_erode_px, d.max_dilate_px + 1))
-            se = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * abs(k) + 1,) * 2)
             op = cv2.dilate if k > 0 else cv2.erode
-            m = op(m.astype(np.uint8), se).astype(bool) if k else m
+            m = op(m.astype(np.uint8), disk(abs(k))).astype(bool) if k else m
             if m.any():
                 out.append(m)
         if rng.random() < d.false_blob_rate:

@@ -11,13 +11,13 @@ import dataclasses
 import resource
 import time
 from collections import defaultdict
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
 from .geometry import invert
+from .timing import StageTimer
 from .io import Frame, RGBDSequence, Trajectory
 from .bgrestore import BgRestoreMethod
 from .depthcluster import DepthClusterMethod
@@ -26,21 +26,6 @@ from .masks import make_mask_source
 from .weightedstatic import WeightedStaticMethod
 from .odometry.dense import DenseConfig, align
 from .odometry.opencv_odometry import OpenCVOdometry, OpenCVOdometryConfig
-
-
-class StageTimer:
-    """Accumulates wall-clock milliseconds per named stage for the current frame."""
-
-    def __init__(self):
-        self.frame: dict[str, float] = defaultdict(float)
-
-    @contextmanager
-    def stage(self, name: str):
-        t = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.frame[name] += (time.perf_counter() - t) * 1000.0
 
 
 @dataclass

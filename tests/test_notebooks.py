@@ -12,6 +12,7 @@ TINY = {
     "11_depthcluster_iterations": {"frames": 10, "pair": 4, "map_stride": 4},
     "20_weightedstatic_masks_and_geometry": {"frames": 12, "pair": 8, "eval_stride": 3, "real_stride": 30},
     "21_weightedstatic_weighted_ba": {"frames": 12, "pair": 8},
+    "30_bgrestore_inpainting": {"frames": 14, "shown": 10, "eval_stride": 5},
 }
 FIGURES = {
     "10_depthcluster_clustering_and_masks": ["A_fig2_depth_clustering.png", "A_blocks.png",
@@ -23,6 +24,9 @@ FIGURES = {
                                              "B_fig5_dynamic_points.png", "B_sigma_sweep.png"],
     "21_weightedstatic_weighted_ba": ["B_weights_before_after.png", "B_lm_cost.png",
                                       "B_fig6_trajectory.png"],
+    "30_bgrestore_inpainting": ["C_fig3_holes.png", "C_fig3_rgb_restoration.png",
+                                "C_fig4_otsu_region_growing.png", "C_fig5_depth_restoration.png",
+                                "C_fig6_matches.png", "C_fig7_fig8_trajectory_errors.png"],
 }
 
 

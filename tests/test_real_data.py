@@ -16,6 +16,7 @@ def bonn_runs():
     seq = open_sequence(need(BONN_CROWD))
     runs = {m: run_method(m, seq) for m in METHODS}
     runs["weightedstatic[person]"] = run_method("weightedstatic", seq, masks="person")
+    runs["bgrestore[person]"] = run_method("bgrestore", seq, masks="person")
     return seq, runs, {m: evaluate(seq.groundtruth, r.trajectory) for m, r in runs.items()}
 
 
@@ -37,8 +38,11 @@ def test_depthcluster_beats_the_static_baselines_on_bonn_crowd(bonn_runs):
     assert dc < 0.5 * errors["opencv-odometry"].ate.rmse, dc
 
 
-def test_weightedstatic_with_person_masks_beats_no_masks_and_the_baselines_on_bonn_crowd(bonn_runs):
-    _, runs, errors = bonn_runs
-    e = evaluate(bonn_runs[0].groundtruth, runs["weightedstatic[person]"].trajectory).ate.rmse
-    for other in ("weightedstatic", "static-orb", "opencv-odometry"):  # "weightedstatic": no masks
+@pytest.mark.parametrize("method", ["weightedstatic", "bgrestore"])
+def test_person_masks_beat_no_masks_and_the_baselines_on_bonn_crowd(bonn_runs, method):
+    seq, runs, errors = bonn_runs
+    e = evaluate(seq.groundtruth, runs[f"{method}[person]"].trajectory).ate.rmse
+    no_masks = {"weightedstatic": "weightedstatic", "bgrestore": "static-orb"}[method]  # bgrestore
+    # without masks removes nothing and tracks as static-orb does
+    for other in (no_masks, "static-orb", "opencv-odometry"):
         assert e < 0.5 * errors[other].ate.rmse, (other, e, errors[other].ate.rmse)

@@ -21,9 +21,10 @@ import numpy as np
 from ..features import FeatureTracker, FrontendConfig, extract
 from ..features.method import FrontendMethod
 from ..geometry import invert
+from ..timing import StageTimer
 from .depthfill import fill_depth_hole
 from .inpaint import KeyframeImage, restore_from_keyframes
-from .removal import RemovalConfig, at, decide_removal
+from .removal import Removal, RemovalConfig, at, decide_removal
 
 
 @dataclass
@@ -56,13 +57,13 @@ class FrameRestoration:
 
     Attributes
     ----------
-    removed : (H, W) bool, the dilated removed instances
+    removal : the removal decision (mask = the dilated removed instances, votes, F, matches)
     restored : (H, W) bool, removed pixels restored from keyframes
     grown : (H, W) bool, removed pixels whose depth came from region growing
     rgb, depth : the restored frame
     """
 
-    removed: np.ndarray
+    removal: Removal
     restored: np.ndarray
     grown: np.ndarray
     rgb: np.ndarray
@@ -75,14 +76,14 @@ class BgRestoreMethod(FrontendMethod):
     name = "bgrestore"
     config_type = BgRestoreConfig
 
-    def __init__(self, camera, config: BgRestoreConfig, masks=None, keep_frames: bool = False):
+    def __init__(self, camera, config: BgRestoreConfig, masks=None, keep: set[int] | None = None):
         super().__init__(camera, config.frontend, masks)
         self.config = config
         self.camera = camera
         self.past_feats: deque = deque(maxlen=max(config.removal.frame_gap, 1))
         self.kf_images: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self.keep_frames = keep_frames
-        self.restorations: list[FrameRestoration] = []  # per frame when keep_frames
+        self.keep = keep or set()
+        self.restorations: dict[int, FrameRestoration] = {}  # frame index -> restoration, for keep
         self.area = np.zeros(3)  # removed, restored, grown pixels over the run
 
     def _keyframe_images(self) -> list[KeyframeImage]:
@@ -90,8 +91,9 @@ class BgRestoreMethod(FrontendMethod):
         ids = [k for k in range(max(0, len(kfs) - self.config.keyframes), len(kfs)) if k in self.kf_images]
         return [KeyframeImage(*self.kf_images[k][:2], invert(kfs[k].T_c_w), self.kf_images[k][2]) for k in ids]
 
-    def _process(self, frame, timer):
+    def process(self, frame, timer=None):
         cfg = self.config
+        timer = timer or StageTimer()
         with timer.stage("masks"):
             instances = self.masks(frame)
         with timer.stage("removal"):
@@ -125,8 +127,8 @@ class BgRestoreMethod(FrontendMethod):
         if tf.keyframe:
             self.kf_images[len(self.tracker.keyframes) - 1] = (rgb, depth, left)
         self.area += [hole.sum(), restored.sum(), grown.sum()]
-        if self.keep_frames:
-            self.restorations.append(FrameRestoration(hole, restored, grown, rgb, depth))
+        if frame.index in self.keep:
+            self.restorations[frame.index] = FrameRestoration(removal, restored, grown, rgb, depth)
         self.frames.append(tf)
         return tf
 

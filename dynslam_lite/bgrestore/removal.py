@@ -18,6 +18,7 @@ import numpy as np
 
 from ..features import Features, match_descriptors
 from ..geometry import epipolar_distance
+from ..masks import dilate
 
 
 @dataclass
@@ -97,8 +98,5 @@ def decide_removal(instances: list[np.ndarray], prev: Features | None, cur: Feat
         n, dyn = int(mine.sum()), int((d[mine] >= cfg.epipolar_px).sum())
         votes.append((dyn, n))
         removed.append(n < cfg.min_points or dyn > cfg.dynamic_fraction * n)
-    mask = np.logical_or.reduce([m for m, r in zip(instances, removed) if r] or [empty])
-    if cfg.dilate_px > 0 and mask.any():
-        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * cfg.dilate_px + 1,) * 2)
-        mask = cv2.dilate(mask.astype(np.uint8), k) > 0
+    mask = dilate(np.logical_or.reduce([m for m, r in zip(instances, removed) if r] or [empty]), cfg.dilate_px)
     return Removal(mask, removed, votes, F, uv_p, uv_c, d)

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from ..geometry import PinholeCamera, interpolate, warp_coordinates
+from ..masks import dilate
 from .clustering import grow_to_components
 
 
@@ -64,11 +65,6 @@ def residuals(
     return r_i.astype(np.float32), r_d
 
 
-def disk(r: int) -> np.ndarray:
-    """Elliptic structuring element of radius ``r`` pixels."""
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-
-
 def outliers(
     r_i: np.ndarray, r_d: np.ndarray, depth_ref: np.ndarray, static: np.ndarray,
     config: OutlierConfig | None = None, components=None,
@@ -105,6 +101,5 @@ def outliers(
     if cfg.grow and components is not None:
         comp, areas = components
         m = grow_to_components(m, comp, areas, cfg.grow_min_overlap, cfg.grow_max_area_fraction * m.size)
-    if cfg.dilate_px:
-        m = cv2.dilate(m.astype(np.uint8), disk(cfg.dilate_px)).astype(bool)
+    m = dilate(m, cfg.dilate_px)
     return m, tau

@@ -21,7 +21,8 @@ import numpy as np
 from ..evaluation import MaskScores, confusion
 from ..geometry import PinholeCamera, rotation_angle_deg, warp_coordinates
 from ..odometry.dense import DenseConfig, align
-from .background import OutlierConfig, disk, outliers, residuals
+from ..masks import disk
+from .background import OutlierConfig, outliers, residuals
 from .clustering import DepthClusters, cluster_depth, layer_components
 from .preremoval import PreRemoval, PreRemovalConfig, pre_remove
 

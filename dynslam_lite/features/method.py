@@ -9,6 +9,7 @@ import numpy as np
 
 from ..geometry import invert
 from ..masks import NoMasks, union
+from ..timing import StageTimer
 from .frontend import FeatureTracker, FrontendConfig
 
 
@@ -27,7 +28,9 @@ class FrontendMethod:
         self.tracker = self.tracker_type(camera, config)
         self.frames = []  # TrackedFrame per frame, for inspection
 
-    def _process(self, frame, timer):
+    def process(self, frame, timer=None):
+        """Track one frame (all frames, in order); ``timer`` collects ms per stage."""
+        timer = timer or StageTimer()
         with timer.stage("masks"):
             instances = self.masks(frame)
         tf = self.tracker.process(frame, union(instances), timer)
@@ -36,9 +39,9 @@ class FrontendMethod:
 
     def track(self, ref, cur, T_init, timer):
         if not self.frames:
-            self._process(ref, timer)
+            self.process(ref, timer)
         T_ref = self.tracker.T_last
-        tf = self._process(cur, timer)
+        tf = self.process(cur, timer)
         return self.tracker.T_last @ invert(T_ref), tf.ok, tf.reason
 
     def trajectory(self) -> np.ndarray:

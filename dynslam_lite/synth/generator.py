@@ -37,7 +37,7 @@ SYNTH_CAMERA = PinholeCamera(535.4, 539.2, 320.1, 247.6, 640, 480, 5000.0, name=
 FPS = 30.0
 GT_RATE_HZ = 100.0
 T0 = 1600000000.0
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 LIGHT_W = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
 
 
@@ -107,7 +107,8 @@ def generate(
     scene : one of :data:`SCENES`
     frames : number of frames (30 Hz)
     seed : textures, sensor noise, camera shake and timestamps derive from it
-    background : also write every frame rendered without the people (for inpainting scores)
+    background : also write every frame rendered without the people, colour (``background/``)
+        and depth (``background_depth/``, same names), for inpainting scores
     """
     if scene not in SCENES:
         raise ValueError(f"unknown synthetic scene {scene!r}: choose one of {', '.join(SCENES)}")
@@ -122,7 +123,7 @@ def generate(
     try:
         renderer = SceneRenderer(scene, seed)
         cam = renderer.camera
-        for sub in ("rgb", "depth", "masks") + (("background",) if background else ()):
+        for sub in ("rgb", "depth", "masks") + (("background", "background_depth") if background else ()):
             (tmp / sub).mkdir()
         t_rgb, t_depth = _timestamps(frames, seed)
         png = [cv2.IMWRITE_PNG_COMPRESSION, 1]
@@ -140,8 +141,10 @@ def generate(
             cv2.imwrite(str(tmp / "depth" / dnames[i]), np.round(depth * 5000).astype(np.uint16), png)
             cv2.imwrite(str(tmp / "masks" / names[i]), moving.astype(np.uint8) * 255, png)
             if background:
-                bg, _, _ = renderer.frame(i, s, with_people=False)
+                bg, bg_depth, _ = renderer.frame(i, s, with_people=False)
                 cv2.imwrite(str(tmp / "background" / names[i]), cv2.cvtColor(bg, cv2.COLOR_RGB2BGR), png)
+                cv2.imwrite(str(tmp / "background_depth" / names[i]),
+                            np.round(bg_depth * 5000).astype(np.uint16), png)
 
         def listing(title, sub, stamps, files):
             rows = [f"# {title}", "# timestamp filename"]

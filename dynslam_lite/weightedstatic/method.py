@@ -141,8 +141,8 @@ class WeightedStaticMethod(FrontendMethod):
         self.counts = {"geometric": np.zeros(3, int), "weights": np.zeros(3, int)}
         self.matches = 0
 
-    def _process(self, frame, timer):
-        tf = super()._process(frame, timer)
+    def process(self, frame, timer=None):
+        tf = super().process(frame, timer)
         est = tf.estimate
         if est is not None and frame.mask is not None and len(tf.kp_idx):
             uv = np.rint(tf.feats.uv[tf.kp_idx]).astype(int)
