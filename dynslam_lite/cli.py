@@ -272,7 +272,7 @@ def cmd_reproduce(a) -> int:
         )
         (writer.tmp / "executed").mkdir(exist_ok=True)
         nb_jobs = [(name, prof_params[a.profile], str(writer.tmp.resolve()), str(cache.resolve()))
-                   for name, prof_params in NOTEBOOK_RUNS.items()]
+                   for name, prof_params in NOTEBOOK_RUNS.items() if not a.no_notebooks]
         failed = []
         with ThreadPoolExecutor(max_workers=a.jobs) as threads:  # kernels are processes
             for name, secs, err in threads.map(_notebook_job, nb_jobs):
@@ -355,6 +355,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--jobs", type=int, default=2, help="worker processes")
     rp.add_argument("--cache", default=str(DEFAULT_CACHE))
     rp.add_argument("--reports", default="reports")
+    rp.add_argument("--no-notebooks", action="store_true",
+                    help="tables only: skip the notebooks (figures and executed notebooks in "
+                         "reports/ stay as they are)")
     rp.set_defaults(func=cmd_reproduce)
     return p
 

@@ -49,12 +49,15 @@ def test_reproduce_quick_and_failed_run_keeps_reports(tmp_path, capsys):
     assert "synthetic/walking_xyz" in table and "opencv-odometry" in table and "depthcluster" in table
     a1 = (reports / "tables" / "paper_a_table1.md").read_text()
     assert "DVO (published)" in a1 and "fr3/walking_xyz" in a1
-    assert main(args) == 0
+    figures = sorted(p.name for p in (reports / "figures").iterdir())
+    assert "C_fig5_depth_restoration.png" in figures
+    assert main(args + ["--no-notebooks"]) == 0
     assert (reports / "tables" / "summary.md").read_text() == table  # deterministic
+    assert sorted(p.name for p in (reports / "figures").iterdir()) == figures  # left in place
     bad = tmp_path / "rgbd_broken"
     bad.mkdir()
     (bad / "rgb.txt").write_text("1.0 rgb/x.png\n")
-    assert main(args + ["--data", str(bad)]) == 2
+    assert main(args + ["--no-notebooks", "--data", str(bad)]) == 2
     assert (reports / "tables" / "summary.md").read_text() == table
     assert not [p for p in reports.iterdir() if p.name.startswith(".tmp")]
 

@@ -125,7 +125,10 @@ class BgRestoreMethod(FrontendMethod):
         depth = np.where(hole & ~restored & ~grown, 0.0, depth).astype(np.float32)
         tf = self.tracker.process(replace(frame, rgb=rgb, depth=depth), left, timer, T_init)
         if tf.keyframe:
-            self.kf_images[len(self.tracker.keyframes) - 1] = (rgb, depth, left)
+            n = len(self.tracker.keyframes)
+            self.kf_images[n - 1] = (rgb, depth, left)
+            for k in [k for k in self.kf_images if k < n - cfg.keyframes]:  # only the latest are used
+                del self.kf_images[k]
         self.area += [hole.sum(), restored.sum(), grown.sum()]
         if frame.index in self.keep:
             self.restorations[frame.index] = FrameRestoration(removal, restored, grown, rgb, depth)
