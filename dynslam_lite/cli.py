@@ -13,6 +13,7 @@ from pathlib import Path
 from .evaluation import evaluate
 from .io import (SequenceError, Trajectory, atomic_write_text, bonn_marker_to_camera, is_bonn,
                  open_sequence, read_trajectory, write_trajectory)
+from .masks import SOURCES
 from .pipeline import METHODS, parse_value, run_method
 from .reports import ReportWriter
 from .synth import SCENES, ensure_scene, generate
@@ -321,8 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="method parameter")
     r.add_argument("--stats", help="write run statistics (JSON) here")
     r.add_argument("--masks", default="none",
-                   help="semantic masks for methods that use them: none, oracle, oracle:degraded, "
-                        "files:DIR, person, person:landscape, onnx:PATH (see dynslam_lite/masks.py)")
+                   help=f"semantic masks for methods that use them: {SOURCES} (see dynslam_lite/masks.py)")
     r.add_argument("--quiet", action="store_true")
     r.set_defaults(func=cmd_run)
 

@@ -285,6 +285,14 @@ def warp_image(
     return out.reshape(depth_ref.shape + image_cur.shape[2:])
 
 
+def sample_nearest(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Values of ``image`` at the nearest pixel of each of the (N, 2) points ``uv``, which are
+    clipped to the image."""
+    col = np.clip(np.rint(uv[:, 0]).astype(int), 0, image.shape[1] - 1)
+    row = np.clip(np.rint(uv[:, 1]).astype(int), 0, image.shape[0] - 1)
+    return image[row, col]
+
+
 def interpolate(image: np.ndarray, u: np.ndarray, v: np.ndarray, wrap: bool = False) -> np.ndarray:
     """Bilinear samples of an image at scattered sub-pixel positions, with ``cv2.remap``.
 

@@ -151,8 +151,9 @@ def _b_seq(name: str) -> str:
     return f"synthetic/{P.SYNTHETIC_ANALOGUE[P.B_SEQUENCES[name]]}"
 
 
-def _improvement(idx, seq, metric) -> str:
-    a, b = idx.get((seq, "static-orb")), idx.get((seq, "weightedstatic"))
+def _improvement(idx, seq, metric, method: str = "weightedstatic") -> str:
+    """RMSE reduction (%) of ``method`` against static-orb, '-' when either is missing."""
+    a, b = idx.get((seq, "static-orb")), idx.get((seq, method))
     if not a or not b or not a[metric]["rmse"]:
         return "-"
     return f"{100.0 * (1.0 - b[metric]['rmse'] / a[metric]['rmse']):.1f}"
@@ -196,28 +197,30 @@ def paper_b_table2(results: list[dict]) -> Table:
                             "does not state its RPE interval).")
 
 
-def paper_b_table3(results: list[dict]) -> Table:
-    """Paper B, Table 3: ATE RMSE / S.D. of other systems (published) and ours (measured)."""
+def _against_others(results, published: dict, others: tuple, measured: tuple, seq_of, metric: str,
+                    sd: str, notes: str) -> Table:
+    """Published (RMSE, SD) of other systems beside measured RMSE / SD; then the real-data rows."""
     idx = _index(results)
-    ms = PAPER_B_MEASURED
     header = (["sequence", "measured on", "frames"]
-              + [f"{m} (published) RMSE / S.D." for m in P.B_TABLE3_METHODS]
-              + [f"{m} (measured) RMSE / S.D." for m in ms])
+              + [f"{m} (published) RMSE / {sd}" for m in others]
+              + [f"{m} (measured) RMSE / {sd}" for m in measured])
 
     def pair(seq, m):
-        return _stats(idx, seq, m, "ate_m", ("rmse", "std"))
+        return _stats(idx, seq, m, metric, ("rmse", "std"))
 
-    rows = []
-    for name, pubs in P.B_TABLE3.items():
-        seq = _b_seq(name)
-        rows.append([name, seq, _frames(idx, seq, ms)] + [f"{a} / {b}" for a, b in pubs]
-                    + [pair(seq, m) for m in ms])
-    for seq in _real(results):
-        rows.append(_real_head(idx, seq, ms) + ["-"] * len(P.B_TABLE3_METHODS)
-                    + [pair(seq, m) for m in ms])
-    notes = ("ATE (m) after SE(3) alignment. Published: paper B's Table 3. Measured: this project "
-             "on the data in 'measured on'; the other systems are not re-run here.")
+    rows = [[name, seq_of(name), _frames(idx, seq_of(name), measured)] + [f"{a} / {b}" for a, b in pubs]
+            + [pair(seq_of(name), m) for m in measured] for name, pubs in published.items()]
+    rows += [_real_head(idx, seq, measured) + ["-"] * len(others) + [pair(seq, m) for m in measured]
+             for seq in _real(results)]
     return header, rows, notes
+
+
+def paper_b_table3(results: list[dict]) -> Table:
+    """Paper B, Table 3: ATE RMSE / S.D. of other systems (published) and ours (measured)."""
+    return _against_others(results, P.B_TABLE3, P.B_TABLE3_METHODS, PAPER_B_MEASURED, _b_seq, "ate_m",
+                           "S.D.", "ATE (m) after SE(3) alignment. Published: paper B's Table 3. "
+                           "Measured: this project on the data in 'measured on'; the other systems "
+                           "are not re-run here.")
 
 
 def paper_b_table4(results: list[dict]) -> Table:
@@ -325,8 +328,7 @@ def paper_c_table1(results: list[dict]) -> Table:
         return _stats(idx, seq, m, "ate_m", ("rmse", "mean", "std"))
 
     def gain(seq):
-        a, b = idx.get((seq, "static-orb")), idx.get((seq, "bgrestore"))
-        return f"{100.0 * (1.0 - b['ate_m']['rmse'] / a['ate_m']['rmse']):.1f}" if a and b else "-"
+        return _improvement(idx, seq, "ate_m", "bgrestore")
 
     rows = [[name, _c_seq(name), _frames(idx, _c_seq(name), ms), " / ".join(map(str, orb)),
              " / ".join(map(str, paper)), cell(_c_seq(name), "static-orb"),
@@ -341,21 +343,9 @@ def paper_c_table1(results: list[dict]) -> Table:
 
 
 def _paper_c_other(results, table, metric, unit_note) -> Table:
-    idx = _index(results)
-    ms = PAPER_C_MEASURED
-    header = (["sequence", "measured on", "frames"]
-              + [f"{m} (published) RMSE / SD" for m in P.C_OTHER_METHODS]
-              + [f"{m} (measured) RMSE / SD" for m in ms])
-
-    def pair(seq, m):
-        return _stats(idx, seq, m, metric, ("rmse", "std"))
-
-    rows = [[name, _c_seq(name), _frames(idx, _c_seq(name), ms)] + [f"{a} / {b}" for a, b in pubs]
-            + [pair(_c_seq(name), m) for m in ms] for name, pubs in table.items()]
-    rows += [_real_head(idx, seq, ms) + ["-"] * len(P.C_OTHER_METHODS) + [pair(seq, m) for m in ms]
-             for seq in _real(results)]
-    notes = f"{unit_note} Published: paper C; the other systems are not re-run here. " + C_MASKS
-    return header, rows, notes
+    return _against_others(results, table, P.C_OTHER_METHODS, PAPER_C_MEASURED, _c_seq, metric, "SD",
+                           f"{unit_note} Published: paper C; the other systems are not re-run here. "
+                           + C_MASKS)
 
 
 def paper_c_table2(results: list[dict]) -> Table:

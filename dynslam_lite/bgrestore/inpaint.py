@@ -1,6 +1,6 @@
 """Paper C, sec. 3: RGB and depth of the removed regions restored from the latest keyframes.
 
-Every keyframe pixel with depth, outside that keyframe's own removed regions, is moved into the
+Every keyframe pixel with depth, outside the people of that keyframe, is moved into the
 current camera, ``x_c = pi(T_cur_kf pi^-1(u, z))``. A pixel landing at sub-pixel ``(x, y)`` inside
 the current hole adds its value to the four pixel centres ``(x', y')`` around it with the overlap
 area of the two unit squares as weight (eq. 8),
@@ -40,7 +40,7 @@ class KeyframeImage:
     ----------
     rgb : (H, W, 3) uint8, restored colour; depth : (H, W) float32 metres, restored depth
     T_w_c : (4, 4) camera-to-world pose
-    invalid : (H, W) bool, pixels not to be used (its own unrestored holes)
+    invalid : (H, W) bool, pixels not to be used (the people of that keyframe, see ``method.py``)
     """
 
     rgb: np.ndarray

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from ..features import Features, match_descriptors
-from ..geometry import epipolar_distance
+from ..geometry import epipolar_distance, sample_nearest
 from ..masks import dilate
 
 
@@ -65,12 +65,6 @@ class Removal:
     distance: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def at(mask: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    u = np.clip(np.rint(uv[:, 0]).astype(int), 0, mask.shape[1] - 1)
-    v = np.clip(np.rint(uv[:, 1]).astype(int), 0, mask.shape[0] - 1)
-    return mask[v, u]
-
-
 def decide_removal(instances: list[np.ndarray], prev: Features | None, cur: Features,
                    shape: tuple[int, int], config: RemovalConfig | None = None) -> Removal:
     """Remove or keep each instance of the current frame (module docstring)."""
@@ -82,21 +76,17 @@ def decide_removal(instances: list[np.ndarray], prev: Features | None, cur: Feat
     if prev is not None and len(prev) and len(cur):
         ia, ib = match_descriptors(prev.desc, cur.desc)
         uv_p, uv_c = prev.uv[ia], cur.uv[ib]
-        inside = np.logical_or.reduce([at(m, uv_c) for m in instances]) if len(ib) else np.zeros(0, bool)
+        hits = [sample_nearest(m, uv_c) for m in instances]  # matches inside each instance
+        inside = np.logical_or.reduce(hits) if len(ib) else np.zeros(0, bool)
         if (~inside).sum() >= 8:
             F, _ = cv2.findFundamentalMat(uv_p[~inside], uv_c[~inside], cv2.FM_RANSAC, cfg.ransac_px, 0.999)
             F = F[:3] if F is not None and F.shape[0] >= 3 else None
         if F is not None:
             d = epipolar_distance(F, uv_p, uv_c)
-    removed, votes = [], []
-    for m in instances:
-        if F is None:
-            removed.append(True)
-            votes.append((0, 0))
-            continue
-        mine = at(m, uv_c)
-        n, dyn = int(mine.sum()), int((d[mine] >= cfg.epipolar_px).sum())
-        votes.append((dyn, n))
-        removed.append(n < cfg.min_points or dyn > cfg.dynamic_fraction * n)
+    if F is None:  # no geometric evidence at all: every instance goes
+        votes = [(0, 0)] * len(instances)
+    else:
+        votes = [(int((d[h] >= cfg.epipolar_px).sum()), int(h.sum())) for h in hits]
+    removed = [F is None or n < cfg.min_points or dyn > cfg.dynamic_fraction * n for dyn, n in votes]
     mask = dilate(np.logical_or.reduce([m for m, r in zip(instances, removed) if r] or [empty]), cfg.dilate_px)
     return Removal(mask, removed, votes, F, uv_p, uv_c, d)

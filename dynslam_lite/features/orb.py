@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..geometry import sample_nearest
+
 
 @dataclass
 class ORBConfig:
@@ -110,11 +112,9 @@ def extract(gray: np.ndarray, depth: np.ndarray, config: ORBConfig | None = None
     octave = np.array([k.octave for k in kps], int)
     keep = _spread(uv, response, cfg.n_features, gray.shape, cfg.grid_cols, cfg.grid_rows)
     uv, response, octave, desc = uv[keep], response[keep], octave[keep], desc[keep]
-    col = np.clip(np.rint(uv[:, 0]).astype(int), 0, gray.shape[1] - 1)
-    row = np.clip(np.rint(uv[:, 1]).astype(int), 0, gray.shape[0] - 1)
-    z = depth[row, col].astype(float)
+    z = sample_nearest(depth, uv).astype(float)
     z[(z < cfg.min_depth_m) | (z > cfg.max_depth_m)] = 0.0
     f = Features(uv, octave, desc, z, response)
     if exclude is not None:
-        f = f.subset(~exclude[row, col])
+        f = f.subset(~sample_nearest(exclude, uv))
     return f

@@ -22,7 +22,7 @@ from ..evaluation import MaskScores, confusion
 from ..features.frontend import Estimate, FeatureTracker, FrontendConfig
 from ..features.method import FrontendMethod
 from ..features.optimize import CHI2_STEREO, optimize_pose
-from ..geometry import invert
+from ..geometry import invert, sample_nearest
 from .geometric import GeometricConfig, weighted_geometric_test
 from .weighted_ba import joint_pose_and_weights
 
@@ -145,9 +145,7 @@ class WeightedStaticMethod(FrontendMethod):
         tf = super().process(frame, timer)
         est = tf.estimate
         if est is not None and frame.mask is not None and len(tf.kp_idx):
-            uv = np.rint(tf.feats.uv[tf.kp_idx]).astype(int)
-            H, W = frame.mask.shape
-            truth = frame.mask[np.clip(uv[:, 1], 0, H - 1), np.clip(uv[:, 0], 0, W - 1)]
+            truth = sample_nearest(frame.mask, tf.feats.uv[tf.kp_idx])
             self.matches += len(truth)
             self.counts["geometric"] += confusion(est.info["geo_dynamic"], truth)
             if "phi" in est.info:
