@@ -1,21 +1,24 @@
-"""Command line: ``python -m dynslam_lite {synth,run,evaluate,bench,reproduce}``."""
+"""Command line: ``python -m dynslam_lite {synth,run,evaluate,bench,reproduce,download}``."""
 from __future__ import annotations
 
 import argparse
 import json
 import multiprocessing as mp
+import os
 import shutil
 import sys
+import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from pathlib import Path
 
+from .download import ARCHIVES, DownloadError, download
 from .evaluation import evaluate
-from .io import (SequenceError, Trajectory, atomic_write_text, bonn_marker_to_camera, is_bonn,
-                 open_sequence, read_trajectory, write_trajectory)
+from .io import (SequenceError, Trajectory, atomic_write_text, bonn_marker_to_camera, format_trajectory,
+                 is_bonn, open_sequence, read_trajectory, write_trajectory)
 from .masks import SOURCES
 from .pipeline import METHODS, parse_value, run_method
-from .reports import ReportWriter
+from .reports import ReportWriter, code_fingerprint, fmt
 from .synth import SCENES, ensure_scene, generate
 from . import tables
 
@@ -140,49 +143,40 @@ def cmd_bench(a) -> int:
 
 # --------------------------------------------------------------------------- reproduction
 
-PROFILES = {
-    "quick": {"scenes": ("static_xyz", "walking_xyz"), "frames": 45},
-    "full": {"scenes": SCENES, "frames": 150},
-}
-
-# The notebooks the reproduction executes (papermill), with their parameters per profile.
-# Paths in parameters are relative to the repository root; output_dir and cache_dir are set by
-# the run.
-NOTEBOOK_RUNS = {
-    "10_depthcluster_clustering_and_masks": {
-        "quick": {"frames": 12, "pair": 6, "eval_frames": 10},
-        "full": {"frames": 150, "pair": 30, "eval_frames": 150},
-    },
-    "11_depthcluster_iterations": {
-        "quick": {"frames": 20, "pair": 6, "map_stride": 5},
-        "full": {"frames": 150, "pair": 30, "map_stride": 10},
-    },
-    "20_weightedstatic_masks_and_geometry": {
-        "quick": {"frames": 20, "pair": 12, "eval_stride": 4, "real_stride": 20},
-        "full": {"frames": 150, "pair": 30, "eval_stride": 5},
-    },
-    "21_weightedstatic_weighted_ba": {
-        "quick": {"frames": 20, "pair": 12},
-        "full": {"frames": 150, "pair": 30},
-    },
-    "30_bgrestore_inpainting": {
-        "quick": {"frames": 20, "shown": 15, "eval_stride": 10},
-        "full": {"frames": 150, "shown": 60, "eval_stride": 10},
-    },
-}
 NOTEBOOK_DIR = Path(__file__).resolve().parents[1] / "notebooks"
+REGISTRY = NOTEBOOK_DIR / "reproduce.yaml"
+
+
+def load_registry(path: Path = REGISTRY) -> tuple[dict, dict]:
+    """(profiles, notebooks) of the reproduction registry (``notebooks/reproduce.yaml``)."""
+    import yaml
+
+    try:
+        reg = yaml.safe_load(path.read_text(encoding="utf-8"))
+        profiles, notebooks = reg["profiles"], reg["notebooks"]
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a readable reproduction registry ({exc})") from exc
+    for prof in profiles.values():
+        prof["scenes"] = tuple(SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
+    for name, params in notebooks.items():
+        if not (NOTEBOOK_DIR / f"{name}.ipynb").exists():
+            raise ValueError(f"{path}: notebook {name}.ipynb does not exist")
+        if set(params) != set(profiles):
+            raise ValueError(f"{path}: notebook {name} needs parameters for every profile {sorted(profiles)}")
+    return profiles, notebooks
 
 
 def _notebook_job(job: tuple) -> tuple[str, float, str]:
     """Execute one notebook with papermill; returns (name, seconds, error or '')."""
-    name, params, out_dir, cache = job
+    name, params = job
     import papermill as pm
 
     t = time.perf_counter()
+    print(f"[notebook] {name}: started", flush=True)
     try:
         pm.execute_notebook(
-            str(NOTEBOOK_DIR / f"{name}.ipynb"), str(Path(out_dir) / "executed" / f"{name}.ipynb"),
-            parameters={**params, "output_dir": str(out_dir), "cache_dir": str(cache)},
+            str(NOTEBOOK_DIR / f"{name}.ipynb"), str(Path(params["output_dir"]) / "executed" / f"{name}.ipynb"),
+            parameters=params,
             cwd=str(NOTEBOOK_DIR.parent), progress_bar=False, kernel_name="python3",
         )
         return name, time.perf_counter() - t, ""
@@ -197,24 +191,62 @@ def _scene_job(job: tuple) -> str:
 
 
 def _evaluate_job(job: tuple) -> dict:
-    """One (sequence, run) evaluated; runs in a worker process."""
-    label, path, camera, count, (run, (method, masks, params)) = job
-    seq = open_sequence(path, camera, 0, count)
-    r = run_method(method, seq, params, masks=masks)
-    e = evaluate(seq.groundtruth, r.trajectory)
+    """One (sequence, run) tracked and evaluated in a worker process; an exception is returned
+    as ``error`` (reported in the summary) instead of ending the batch."""
+    label, path, (run, (method, masks, params)) = job
+    t = time.perf_counter()
+    try:
+        seq = open_sequence(path)
+        print(f"[run] {label:32s} {run:42s} started ({len(seq)} frames)", flush=True)
+        r = run_method(method, seq, params, masks=masks)
+        text = format_trajectory(r.trajectory)  # scored as written: notebook 90 gets the same numbers
+        with tempfile.TemporaryDirectory() as tmp:
+            (Path(tmp) / "t.txt").write_text(text)
+            e = evaluate(seq.groundtruth, read_trajectory(Path(tmp) / "t.txt"))
+    except Exception as exc:
+        return {"sequence": label, "method": run, "error": f"{type(exc).__name__}: {exc}",
+                "seconds": time.perf_counter() - t}
     stats = r.stats()
-    return {"sequence": label, "method": run, "frames": len(seq), **e.as_dict(),
+    return {"sequence": label, "method": run, "path": str(path), "frames": len(seq), **e.as_dict(),
             "failed_frames": len(r.failed_frames), "ms_per_frame": stats["ms_per_frame"],
             "stages": {k: float(sum(v)) / len(seq) for k, v in r.stage_ms.items()},
-            "extras": r.extras}
+            "extras": r.extras, "seconds": time.perf_counter() - t,
+            "trajectory": text}
+
+
+def _file_name(label: str) -> str:
+    """A run label ('weightedstatic[oracle:degraded]') as a plain file name."""
+    return "".join(c if c.isalnum() or c in "._-" else "_" for c in label).strip("_")
+
+
+def _relative(path) -> str:
+    """A path relative to the repository root where possible (committed reports stay portable)."""
+    p = Path(path).resolve()
+    return os.path.relpath(p, NOTEBOOK_DIR.parent)
+
+
+def _write_runs(writer: ReportWriter, results: list[dict]) -> None:
+    """Every estimated trajectory (TUM) and ``runs.json`` (where each came from, what it measured)
+    under ``trajectories/``: the input of notebook 90."""
+    index = []
+    for r in results:
+        rel = f"trajectories/{r['sequence']}/{_file_name(r['method'])}.txt"
+        writer.write_text(rel, r["trajectory"])
+        index.append({k: v for k, v in r.items() if k not in ("trajectory", "seconds")}
+                     | {"path": _relative(r["path"]), "trajectory": rel.split("/", 1)[1]})
+    writer.write_text("trajectories/runs.json", json.dumps(index, indent=1) + "\n")
 
 
 def cmd_reproduce(a) -> int:
     """Batch reproduction on the embedded synthetic default (plus --data sequences)."""
-    prof = PROFILES[a.profile]
+    profiles, notebooks = load_registry()
+    if a.profile not in profiles:
+        raise ValueError(f"unknown profile {a.profile!r}: {REGISTRY} has {', '.join(profiles)}")
+    prof = profiles[a.profile]
     frames = a.frames or prof["frames"]
     cache = Path(a.cache)
     t0 = time.perf_counter()
+    fingerprint = code_fingerprint(NOTEBOOK_DIR.parent)
     jobs = []
     for d in a.data or []:
         seq = open_sequence(d)  # validate real data before any long work, with a clear error
@@ -228,74 +260,102 @@ def cmd_reproduce(a) -> int:
             runs = dict(SYNTHETIC_RUNS, **(ABLATION_RUNS if scene in ABLATION_SCENES else {}),
                         **(PAPER_C_RUNS if scene in PAPER_C_SCENES else {}),
                         **(PAPER_C_ABLATION if scene == "walking_xyz" else {}))
-            jobs += [(f"synthetic/{scene}", path, None, None, run) for run in runs.items()]
+            jobs += [(f"synthetic/{scene}", path, run) for run in runs.items()]
         for d in a.data or []:
-            jobs += [(f"real/{Path(d).resolve().name}", d, None, None, run) for run in REAL_RUNS.items()]
-        results = []
-        for res in pool.map(_evaluate_job, jobs):
-            print(f"[run] {res['sequence']:32s} {res['method']:42s} ATE {res['ate_m']['rmse']:.4f} m "
-                  f"RPE {res['rpe_trans_m_per_s']['rmse']:.4f} m/s "
-                  f"{res['rpe_rot_deg_per_s']['rmse']:.3f} deg/s", flush=True)
-            results.append(res)
+            jobs += [(f"real/{Path(d).resolve().name}", d, run) for run in REAL_RUNS.items()]
+        t_runs = time.perf_counter()
+        print(f"[runs] {len(jobs)} runs on {a.jobs} worker(s)", flush=True)
+        futures = [pool.submit(_evaluate_job, job) for job in jobs]
+        for k, fut in enumerate(as_completed(futures), 1):
+            res = fut.result()
+            head = f"[run {k}/{len(jobs)}] {res['sequence']:32s} {res['method']:42s}"
+            if "error" in res:
+                print(f"{head} FAILED {res['error']}", flush=True)
+            else:
+                print(f"{head} ATE {res['ate_m']['rmse']:.4f} m RPE {fmt(res['rpe_trans_m_per_s']['rmse'])} m/s "
+                      f"({res['frames']} frames, {res['seconds']:.0f} s)", flush=True)
+        results = [f.result() for f in futures]  # job order: deterministic tables
+    failed_runs = [r for r in results if "error" in r]
+    results = [r for r in results if "error" not in r]
+    t_nb = time.perf_counter()
     writer = ReportWriter(a.reports)
+    nb_times, failed_nbs = {}, []
     try:
-        src = (f" Run: `python -m dynslam_lite reproduce --profile {a.profile}` "
-               f"(synthetic seed {a.seed}).")
-        for stem, title, make in (
-            ("summary", f"Every method on every sequence ({a.profile} profile, measured)", tables.summary),
-            ("paper_a_table1", "Paper A, Table 1: relative pose error (RMSE)", tables.paper_a_table1),
-            ("paper_a_table2", "Paper A, Table 2: absolute trajectory error (m)", tables.paper_a_table2),
-            ("paper_a_masks", "Paper A: moving-object masks of depthcluster against ground truth",
-             tables.paper_a_masks),
-            ("paper_b_table1", "Paper B, Table 1: absolute trajectory error (m)", tables.paper_b_table1),
-            ("paper_b_table2", "Paper B, Table 2: relative pose error (translation)", tables.paper_b_table2),
-            ("paper_b_table3", "Paper B, Table 3: ATE against other systems (m)", tables.paper_b_table3),
-            ("paper_b_table4", "Paper B, Table 4: tracking time per frame", tables.paper_b_table4),
-            ("paper_b_ablation", "Paper B: what the geometric test and the weights add over masks",
-             tables.paper_b_ablation),
-            ("paper_b_points", "Paper B: dynamic-point classification against ground truth",
-             tables.paper_b_points),
-            ("paper_c_table1", "Paper C, Table 1: ATE against the baseline (m)", tables.paper_c_table1),
-            ("paper_c_table2", "Paper C, Table 2: ATE against other systems (m)", tables.paper_c_table2),
-            ("paper_c_table3", "Paper C, Table 3: relative translation error", tables.paper_c_table3),
-            ("paper_c_table4", "Paper C, Table 4: relative rotation error", tables.paper_c_table4),
-            ("paper_c_restoration", "Paper C: removed and restored area", tables.paper_c_restoration),
-        ):
-            header, rows, notes = make(results)
-            writer.table(f"tables/{stem}", title, header, rows, notes=notes + src)
-        writer.table(
-            "tables/timing", "Time per frame of every run (machine-dependent)",
-            ["sequence", "method", "ms/frame"],
-            [[r["sequence"], r["method"], f"{r['ms_per_frame']:.1f}"] for r in results],
-            notes="Wall-clock milliseconds per frame, whole pipeline, measured during the run on "
-                  "this machine with other jobs in parallel: varies between runs, unlike the "
-                  "error tables. `python -m dynslam_lite bench` measures per stage.",
-        )
+        source = (f"Run: `python -m dynslam_lite reproduce --profile {a.profile}` (synthetic seed "
+                  f"{a.seed}, {frames} frames" + "".join(f", --data {Path(d).name}" for d in a.data or []) + ").")
+        tables.write_all(results, writer.tmp, source)
+        writer.adopt_all()
+        _write_runs(writer, results)
         (writer.tmp / "executed").mkdir(exist_ok=True)
-        nb_jobs = [(name, prof_params[a.profile], str(writer.tmp.resolve()), str(cache.resolve()))
-                   for name, prof_params in NOTEBOOK_RUNS.items() if not a.no_notebooks]
-        failed = []
+        out = str(writer.tmp.resolve())
+        nb_jobs = [(name, {**params[a.profile], "output_dir": out,
+                           **({"runs_dir": str(writer.tmp.resolve() / "trajectories"), "source": source}
+                              if name.startswith("90_") else {"cache_dir": str(cache.resolve())})})
+                   for name, params in notebooks.items() if not a.no_notebooks]
         with ThreadPoolExecutor(max_workers=a.jobs) as threads:  # kernels are processes
             for name, secs, err in threads.map(_notebook_job, nb_jobs):
                 print(f"[notebook] {name}: {'FAILED ' + err if err else 'ok'} ({secs:.0f} s)", flush=True)
+                nb_times[name] = secs
                 if err:
-                    failed.append(name)
-        if failed:
-            keep = Path(a.cache).parent / "failed_notebooks"
-            keep.mkdir(parents=True, exist_ok=True)
-            for name in failed:
+                    failed_nbs.append((name, err))
+        command = (f"python -m dynslam_lite reproduce --profile {a.profile}"
+                   + (f" --frames {a.frames}" if a.frames else "") + (f" --seed {a.seed}" if a.seed else "")
+                   + "".join(f" --data {_relative(d)}" for d in a.data or []))
+        writer.write_text("provenance.json", json.dumps({
+            "command": command, "profile": a.profile, "frames": frames, "seed": a.seed,
+            "scenes": list(prof["scenes"]), "data": [_relative(d) for d in a.data or []],
+            "notebooks": not a.no_notebooks, "code_sha256": fingerprint}, indent=1) + "\n")
+        writer.write_text("README.md", (Path(__file__).with_name("reports_README.md")).read_text().replace(
+            "{{provenance}}",
+            f"This folder was written by `{command}` ({a.profile} profile: {len(prof['scenes'])} synthetic "
+            f"scenes x {frames} frames, seed {a.seed}"
+            + (", plus the real clips " + ", ".join(f"`{Path(d).name}`" for d in a.data) if a.data else "")
+            + "; which methods run where is set in `dynslam_lite/cli.py`)."))
+        _summary(results, failed_runs, nb_times, failed_nbs, t_nb - t_runs, time.perf_counter() - t0)
+        if failed_runs or failed_nbs:
+            keep = cache.parent / "failed_notebooks"
+            for name, _ in failed_nbs:
                 src = writer.tmp / "executed" / f"{name}.ipynb"
                 if src.exists():
+                    keep.mkdir(parents=True, exist_ok=True)
                     shutil.copy(src, keep / src.name)
-            raise RuntimeError(f"notebook(s) failed: {', '.join(failed)}; reports/ left as it was; "
-                               f"executed copies with the error in {keep}")
+            raise RuntimeError(f"{len(failed_runs)} run(s) and {len(failed_nbs)} notebook(s) failed; "
+                               f"{a.reports}/ left as it was"
+                               + (f"; executed copies with the error in {keep}" if failed_nbs else ""))
         writer.adopt_all()
         done = writer.commit()
     except BaseException:
         writer.abort()
         raise
-    print(f"[done] {len(results)} runs in {time.perf_counter() - t0:.0f} s; wrote "
-          + ", ".join(str(p) for p in done))
+    print(f"[done] wrote {len(done)} files under {a.reports}/ (index: {a.reports}/README.md)")
+    return 0
+
+
+def _summary(results, failed_runs, nb_times, failed_nbs, run_secs, total_secs) -> None:
+    """What ran, how long, what failed: printed at the end of the batch."""
+    seqs = sorted({r["sequence"] for r in results})
+    print("\n[summary]")
+    print(f"  runs:      {len(results)} ok, {len(failed_runs)} failed, on {len(seqs)} sequences, "
+          f"{run_secs / 60:.1f} min")
+    for r in failed_runs:
+        print(f"    FAILED {r['sequence']} {r['method']}: {r['error']}")
+    lost = [(r["sequence"], r["method"], r["failed_frames"]) for r in results if r["failed_frames"]]
+    for seq, m, n in lost:
+        print(f"    tracking failed on {n} frame(s): {seq} {m}")
+    print(f"  notebooks: {len(nb_times) - len(failed_nbs)} ok, {len(failed_nbs)} failed"
+          + "".join(f"; {n} {t:.0f} s" for n, t in nb_times.items()))
+    for name, err in failed_nbs:
+        print(f"    FAILED {name}: {err}")
+    print(f"  total:     {total_secs / 60:.1f} min", flush=True)
+
+
+def cmd_download(a) -> int:
+    if a.list or not a.names:
+        for name, arc in ARCHIVES.items():
+            print(f"{name:24s} {arc.url}")
+        return 0
+    for name in a.names:
+        download(name, a.dest, a.base_url, a.sha256, keep_archive=a.keep_archive)
     return 0
 
 
@@ -348,7 +408,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=cmd_bench)
 
     rp = sub.add_parser("reproduce", help="batch reproduction into reports/")
-    rp.add_argument("--profile", choices=sorted(PROFILES), default="full")
+    rp.add_argument("--profile", default="full", help=f"a profile of {REGISTRY.name}: tiny, quick or full")
     rp.add_argument("--frames", type=int, default=None, help="override the profile's frame count")
     rp.add_argument("--data", action="append", help="real TUM/Bonn sequence folder (repeatable)")
     rp.add_argument("--seed", type=int, default=0)
@@ -359,6 +419,15 @@ def build_parser() -> argparse.ArgumentParser:
                     help="tables only: skip the notebooks (figures and executed notebooks in "
                          "reports/ stay as they are)")
     rp.set_defaults(func=cmd_reproduce)
+
+    dl = sub.add_parser("download", help="fetch the papers' TUM / Bonn sequences (resumable, verified)")
+    dl.add_argument("names", nargs="*", metavar="NAME", help="e.g. fr3_walking_xyz bonn_crowd (--list)")
+    dl.add_argument("--dest", default=str(Path("build") / "datasets"), help="download cache folder")
+    dl.add_argument("--list", action="store_true", help="list the known sequences and their URLs")
+    dl.add_argument("--base-url", default=None, help="a mirror serving the same archive file names")
+    dl.add_argument("--sha256", default=None, help="expected checksum (one NAME)")
+    dl.add_argument("--keep-archive", action="store_true", help="keep the .tgz/.zip after unpacking")
+    dl.set_defaults(func=cmd_download)
     return p
 
 
@@ -366,6 +435,6 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (SequenceError, ValueError, FileNotFoundError, FileExistsError, RuntimeError) as exc:
+    except (SequenceError, DownloadError, ValueError, FileNotFoundError, FileExistsError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

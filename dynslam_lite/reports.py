@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import math
 import os
@@ -35,6 +36,37 @@ def csv_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
     return buf.getvalue()
 
 
+def table_files(title: str, header, rows, notes: str = "", digits: int = 4) -> tuple[str, str]:
+    """(Markdown with title, table and notes; CSV) of one results table."""
+    md = f"# {title}\n\n" + markdown_table(header, rows, digits)
+    if notes:
+        md += "\n" + notes.strip() + "\n"
+    return md, csv_table(header, rows)
+
+
+def write_table(root: str | Path, rel_stem: str, title: str, header, rows, notes: str = "") -> None:
+    """Write ``root/rel_stem``.md and .csv (see :func:`table_files`)."""
+    md, csv_text = table_files(title, header, rows, notes)
+    path = Path(root) / rel_stem
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.with_suffix(".md").write_text(md, encoding="utf-8")
+    path.with_suffix(".csv").write_text(csv_text, encoding="utf-8")
+
+
+# what the committed reports depend on: the package's code (download.py aside) and the notebooks
+FINGERPRINTED = ("dynslam_lite/**/*.py", "notebooks/*.ipynb", "notebooks/reproduce.yaml")
+
+
+def code_fingerprint(repo: str | Path) -> str:
+    """sha256 over the files that produce the reports (:data:`FINGERPRINTED`), by relative path."""
+    repo = Path(repo)
+    h = hashlib.sha256()
+    files = sorted({p for pattern in FINGERPRINTED for p in repo.glob(pattern)} - {repo / "dynslam_lite/download.py"})
+    for path in files:
+        h.update(path.relative_to(repo).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 class ReportWriter:
     """Collects report files in a temporary folder; :meth:`commit` moves them into place.
 
@@ -57,11 +89,9 @@ class ReportWriter:
 
     def table(self, rel_stem: str, title: str, header, rows, notes: str = "", digits: int = 4):
         """Write ``rel_stem``.md (title, table, notes) and ``rel_stem``.csv."""
-        md = f"# {title}\n\n" + markdown_table(header, rows, digits)
-        if notes:
-            md += "\n" + notes.strip() + "\n"
+        md, csv_text = table_files(title, header, rows, notes, digits)
         self.write_text(rel_stem + ".md", md)
-        self.write_text(rel_stem + ".csv", csv_table(header, rows))
+        self.write_text(rel_stem + ".csv", csv_text)
 
     def adopt_all(self) -> None:
         """Take every file written straight into the temporary folder (figures, notebooks)."""

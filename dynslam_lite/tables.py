@@ -124,16 +124,40 @@ def paper_a_masks(results: list[dict]) -> Table:
     return header, rows, notes
 
 
+def _reduction(idx, seq, metric, method, base) -> float | None:
+    """RMSE reduction (%) of ``method`` against ``base`` on ``seq``; None when either is missing."""
+    a, b = idx.get((seq, base)), idx.get((seq, method))
+    if not a or not b or not a[metric]["rmse"] or b[metric]["rmse"] is None:
+        return None
+    return 100.0 * (1.0 - b[metric]["rmse"] / a[metric]["rmse"])
+
+
+def _pct(value: float | None) -> str:
+    return "-" if value is None else f"{value:.1f}"
+
+
+STATIC_BASELINES = ("static-dense", "static-orb")  # the papers' DVO and ORB-SLAM2 stand-ins
+
+
 def summary(results: list[dict]) -> Table:
-    """Every method x every sequence: ATE RMSE, 1-s RPE, failed frames."""
+    """Every method x every sequence: ATE RMSE, 1-s RPE, failed frames, and the RMSE reduction
+    against the static baselines (the papers' headline percentages, measured)."""
+    idx = _index(results)
     header = ["sequence", "frames", "method", "ATE RMSE (m)", "ATE max (m)", "ATE min (m)",
               "RPE trans RMSE (m/s)", "RPE rot RMSE (deg/s)", "failed frames"]
+    header += [f"{m} reduction vs {b} (%)" for b in STATIC_BASELINES for m in ("ATE", "RPE")]
     rows = [[r["sequence"], r["frames"], r["method"], r["ate_m"]["rmse"], r["ate_m"]["max"],
              r["ate_m"]["min"], r["rpe_trans_m_per_s"]["rmse"], r["rpe_rot_deg_per_s"]["rmse"],
-             r["failed_frames"]] for r in results]
+             r["failed_frames"]]
+            + [_pct(_reduction(idx, r["sequence"], metric, r["method"], b)) if r["method"] != b else "-"
+               for b in STATIC_BASELINES for metric in ("ate_m", "rpe_trans_m_per_s")]
+            for r in results]
     notes = ("Measured by `python -m dynslam_lite reproduce` on the data named in the first column "
              "(synthetic = the embedded generator). ATE: SE(3)-aligned, 0.02 s association; RPE: "
-             "1-s pairs as TUM's evaluate_rpe.py ('-' where the clip is shorter than 1 s).")
+             "1-s pairs as TUM's evaluate_rpe.py ('-' where the clip is shorter than 1 s). "
+             "Reduction = 1 - RMSE(method) / RMSE(baseline) on the same sequence, in % (negative: "
+             "worse than the baseline): `static-dense` stands in for DVO (paper A's baseline), "
+             "`static-orb` for ORB-SLAM2 (papers B and C).")
     return header, rows, notes
 
 
@@ -153,10 +177,7 @@ def _b_seq(name: str) -> str:
 
 def _improvement(idx, seq, metric, method: str = "weightedstatic") -> str:
     """RMSE reduction (%) of ``method`` against static-orb, '-' when either is missing."""
-    a, b = idx.get((seq, "static-orb")), idx.get((seq, method))
-    if not a or not b or not a[metric]["rmse"]:
-        return "-"
-    return f"{100.0 * (1.0 - b[metric]['rmse'] / a[metric]['rmse']):.1f}"
+    return _pct(_reduction(idx, seq, metric, method, "static-orb"))
 
 
 def _paper_b_rpe_ate(results, table, metric, unit_note) -> Table:
@@ -370,7 +391,7 @@ def paper_c_table4(results: list[dict]) -> Table:
 def paper_c_restoration(results: list[dict]) -> Table:
     """How much of the removed area bgrestore restored from keyframes and by region growing."""
     header = ["sequence", "run", "frames", "removed px / frame", "restored from keyframes %",
-              "depth by region growing %", "ATE RMSE (m)", "ms / frame"]
+              "depth by region growing %", "ATE RMSE (m)"]
     rows = []
     for r in results:
         ex = r.get("extras") or {}
@@ -380,10 +401,52 @@ def paper_c_restoration(results: list[dict]) -> Table:
         rows.append([r["sequence"], r["method"], r["frames"], "-" if removed is None else f"{removed:.0f}",
                      "-" if removed is None else f"{100 * ex['restored_fraction']:.1f}",
                      "-" if removed is None else f"{100 * ex['depth_grown_fraction']:.1f}",
-                     r["ate_m"]["rmse"], f"{r['ms_per_frame']:.1f}"])
+                     r["ate_m"]["rmse"]])
     notes = ("Removed: the dilated instances judged dynamic (semantic + epipolar). Restored: removed "
              "pixels that received keyframe colour and depth (eq. 8-9); region growing: removed "
              "pixels no keyframe saw, given depth by 3-class Otsu region growing. Runs: "
              "'[no-restore]' removes without restoring, '[adjacent]' compares adjacent frames as the "
-             "paper does (frame_gap=1; default 6 frames), so both choices are measured.")
+             "paper does (frame_gap=1; default 6 frames), so both choices are measured. Time per frame: "
+             "tables/timing.md.")
     return header, rows, notes
+
+
+def timing(results: list[dict]) -> Table:
+    """Wall-clock ms per frame of every run of the batch."""
+    rows = [[r["sequence"], r["method"], f"{r['ms_per_frame']:.1f}"] for r in results]
+    notes = ("Wall-clock milliseconds per frame, whole pipeline, measured during the run on this "
+             "machine with other jobs in parallel: varies between runs, unlike the error tables. "
+             "`python -m dynslam_lite bench` measures per stage.")
+    return ["sequence", "method", "ms/frame"], rows, notes
+
+
+# Every table of the batch: file stem under tables/, title, function of the evaluated runs.
+REPORT_TABLES = (
+    ("summary", "Every method on every sequence (measured)", summary),
+    ("paper_a_table1", "Paper A, Table 1: relative pose error (RMSE)", paper_a_table1),
+    ("paper_a_table2", "Paper A, Table 2: absolute trajectory error (m)", paper_a_table2),
+    ("paper_a_masks", "Paper A: moving-object masks of depthcluster against ground truth", paper_a_masks),
+    ("paper_b_table1", "Paper B, Table 1: absolute trajectory error (m)", paper_b_table1),
+    ("paper_b_table2", "Paper B, Table 2: relative pose error (translation)", paper_b_table2),
+    ("paper_b_table3", "Paper B, Table 3: ATE against other systems (m)", paper_b_table3),
+    ("paper_b_table4", "Paper B, Table 4: tracking time per frame", paper_b_table4),
+    ("paper_b_ablation", "Paper B: what the geometric test and the weights add over masks", paper_b_ablation),
+    ("paper_b_points", "Paper B: dynamic-point classification against ground truth", paper_b_points),
+    ("paper_c_table1", "Paper C, Table 1: ATE against the baseline (m)", paper_c_table1),
+    ("paper_c_table2", "Paper C, Table 2: ATE against other systems (m)", paper_c_table2),
+    ("paper_c_table3", "Paper C, Table 3: relative translation error", paper_c_table3),
+    ("paper_c_table4", "Paper C, Table 4: relative rotation error", paper_c_table4),
+    ("paper_c_restoration", "Paper C: removed and restored area", paper_c_restoration),
+    ("timing", "Time per frame of every run (machine-dependent)", timing),
+)
+
+
+def write_all(results: list[dict], root, source: str) -> list[str]:
+    """Write every table of :data:`REPORT_TABLES` under ``root/tables`` (``source`` ends each
+    table's notes: the command and data). Returns the stems written."""
+    from .reports import write_table
+
+    for stem, title, make in REPORT_TABLES:
+        header, rows, notes = make(results)
+        write_table(root, f"tables/{stem}", title, header, rows, notes=notes + " " + source)
+    return [stem for stem, _, _ in REPORT_TABLES]

@@ -1,19 +1,19 @@
-"""Every notebook runs end to end under papermill on tiny parameters."""
+"""The notebooks' registry and parameters. Every notebook is executed by the tiny reproduction in
+``tests/test_cli.py`` (which also checks the figures each one writes)."""
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import papermill as pm
 import pytest
 
+from dynslam_lite.cli import load_registry
+
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 
-TINY = {
-    "10_depthcluster_clustering_and_masks": {"frames": 8, "pair": 3, "real_pair": 3, "eval_frames": 5},
-    "11_depthcluster_iterations": {"frames": 10, "pair": 4, "map_stride": 4},
-    "20_weightedstatic_masks_and_geometry": {"frames": 12, "pair": 8, "eval_stride": 3, "real_stride": 30},
-    "21_weightedstatic_weighted_ba": {"frames": 12, "pair": 8},
-    "30_bgrestore_inpainting": {"frames": 14, "shown": 10, "eval_stride": 5},
-}
+# figures each notebook must write (checked after the tiny reproduction)
 FIGURES = {
     "10_depthcluster_clustering_and_masks": ["A_fig2_depth_clustering.png", "A_blocks.png",
                                              "A_fig7_removal_synthetic.png"],
@@ -27,19 +27,39 @@ FIGURES = {
     "30_bgrestore_inpainting": ["C_fig3_holes.png", "C_fig3_rgb_restoration.png",
                                 "C_fig4_otsu_region_growing.png", "C_fig5_depth_restoration.png",
                                 "C_fig6_matches.png", "C_fig7_fig8_trajectory_errors.png"],
+    "90_results_tables": ["summary_ate.png"],
 }
 
 
-def test_every_notebook_has_tiny_parameters():
-    assert {p.stem for p in NOTEBOOKS} == set(TINY)
+def test_registry_lists_every_notebook_with_declared_parameters_per_profile():
+    profiles, notebooks = load_registry()
+    assert {"tiny", "quick", "full"} <= set(profiles)
+    assert list(notebooks) == [p.stem for p in NOTEBOOKS] == list(FIGURES)
+    for nb in NOTEBOOKS:
+        declared = set(pm.inspect_notebook(str(nb)))
+        for profile, params in notebooks[nb.stem].items():
+            assert set(params) <= declared, (nb.stem, profile, set(params) - declared)
 
 
 @pytest.mark.parametrize("nb", NOTEBOOKS, ids=lambda p: p.stem)
-def test_notebook_runs(nb, tmp_path, synth_cache):
-    params = dict(TINY[nb.stem], output_dir=str(tmp_path / "out"), cache_dir=str(synth_cache))
-    declared = {p for p in pm.inspect_notebook(str(nb))}
-    assert set(params) <= declared, set(params) - declared
-    pm.execute_notebook(str(nb), str(tmp_path / nb.name), parameters=params, cwd=str(ROOT),
-                        progress_bar=False, kernel_name="python3")
-    for fig in FIGURES[nb.stem]:
-        assert (tmp_path / "out" / "figures" / fig).stat().st_size > 10_000, fig
+def test_every_parameter_is_documented(nb):
+    params = pm.inspect_notebook(str(nb))
+    assert params and all(p["help"].strip() for p in params.values()), \
+        [n for n, p in params.items() if not p["help"].strip()]
+    assert {"output_dir"} <= set(params)
+
+
+def test_papermill_help_notebook_prints_each_parameter():
+    nb = ROOT / "notebooks" / "90_results_tables.ipynb"
+    out = subprocess.run([sys.executable, "-m", "papermill", "--help-notebook", str(nb)],
+                         capture_output=True, text=True, check=True).stdout
+    for name, p in pm.inspect_notebook(str(nb)).items():
+        assert re.search(rf"{name}: {p['inferred_type_name']} \(default .*\)\s+{re.escape(p['help'])}", out), (name, out)
+
+
+def test_notebooks_are_committed_without_outputs():
+    import nbformat
+
+    for nb in NOTEBOOKS:
+        cells = nbformat.read(nb, as_version=4).cells
+        assert not [c for c in cells if c.cell_type == "code" and (c.outputs or c.execution_count)], nb.name

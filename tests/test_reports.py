@@ -1,0 +1,32 @@
+"""The committed reports/ are in step with the code: written by the full profile from the code and
+notebooks as they are now, and every file the index links to is there."""
+import json
+import re
+from pathlib import Path
+
+from dynslam_lite.reports import code_fingerprint
+
+ROOT = Path(__file__).resolve().parents[1]
+REPORTS = ROOT / "reports"
+
+
+def test_committed_reports_come_from_the_current_code():
+    prov = json.loads((REPORTS / "provenance.json").read_text())
+    assert prov["profile"] == "full" and prov["notebooks"], prov
+    assert prov["code_sha256"] == code_fingerprint(ROOT), (
+        "reports/ is stale: the code or notebooks changed since it was written. Run "
+        f"`{prov['command']}` and commit reports/.")
+
+
+def test_every_indexed_table_and_figure_is_committed():
+    index = (REPORTS / "README.md").read_text()
+    linked = re.findall(r"\]\(((?:tables|figures|trajectories)/[^)]+|provenance\.json)\)", index)
+    assert len(linked) > 40
+    missing = [rel for rel in linked if not (REPORTS / rel).exists()]
+    assert not missing, missing
+    written = {p.relative_to(REPORTS).as_posix() for d in ("tables", "figures") for p in (REPORTS / d).iterdir()}
+    unindexed = {w for w in written if w not in linked and w.replace(".csv", ".md") not in linked}
+    assert not unindexed, unindexed
+    runs = json.loads((REPORTS / "trajectories" / "runs.json").read_text())
+    assert all((REPORTS / "trajectories" / r["trajectory"]).exists() for r in runs)
+    assert {r["sequence"] for r in runs} >= {"real/rgbd_bonn_crowd_dev"}  # the real-data columns
