@@ -184,6 +184,14 @@ def _notebook_job(job: tuple) -> tuple[str, float, str]:
         return name, time.perf_counter() - t, f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else ''}"
 
 
+def _worker_init(jobs: int) -> None:
+    """OpenCV's own thread pool: one thread per worker when the workers share the cores."""
+    if jobs > 1:
+        import cv2
+
+        cv2.setNumThreads(1)
+
+
 def _scene_job(job: tuple) -> str:
     """Generate (or find cached) one synthetic scene; runs in a worker process."""
     cache, scene, frames, seed = job
@@ -247,12 +255,16 @@ def cmd_reproduce(a) -> int:
     cache = Path(a.cache)
     t0 = time.perf_counter()
     fingerprint = code_fingerprint(NOTEBOOK_DIR.parent)
+    if a.jobs > 1:  # one BLAS thread per worker and notebook kernel (inherited): with 2 workers on
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # 2 cores,
+            os.environ.setdefault(var, "1")  # OpenBLAS's spinning threads doubled the run time
     jobs = []
     for d in a.data or []:
         seq = open_sequence(d)  # validate real data before any long work, with a clear error
         print(f"[data] {d}: {len(seq)} frames", flush=True)
     # spawn, not fork: a forked child inherits OpenCV's thread pool in a broken state and hangs
-    with ProcessPoolExecutor(max_workers=a.jobs, mp_context=mp.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(max_workers=a.jobs, mp_context=mp.get_context("spawn"),
+                             initializer=_worker_init, initargs=(a.jobs,)) as pool:
         scenes = list(prof["scenes"])
         paths = pool.map(_scene_job, [(str(cache), s, frames, a.seed) for s in scenes])
         for scene, path in zip(scenes, paths):

@@ -97,3 +97,28 @@ def test_module_entry_point_help():
                          capture_output=True, text=True, check=True).stdout
     for cmd in ("synth", "run", "evaluate", "bench", "reproduce", "download"):
         assert cmd in out
+
+
+def test_failed_run_and_failed_notebook_are_reported_and_reports_kept(tmp_path, capsys, monkeypatch):
+    """A run that raises (an unreadable PNG mid-sequence) and a notebook that raises are both
+    listed in the summary; the command fails and reports/ keeps what an earlier run wrote."""
+    import dynslam_lite.cli as cli
+
+    reports = tmp_path / "reports"
+    (reports / "tables").mkdir(parents=True)
+    (reports / "tables" / "summary.md").write_text("earlier good run\n")
+    seq = tmp_path / "rgbd_dataset_freiburg3_broken"
+    assert main(["synth", str(seq), "--scene", "static_xyz", "--frames", "6", "--quiet"]) == 0
+    sorted((seq / "rgb").iterdir())[3].write_bytes(b"not a png")
+    monkeypatch.setattr(cli, "load_registry", lambda: (
+        {"tiny": {"scenes": ("static_xyz",), "frames": 6}},
+        {"10_depthcluster_clustering_and_masks": {"tiny": {"frames": 6, "scene": "no_such_scene"}}}))
+    rc = main(["reproduce", "--profile", "tiny", "--jobs", "2", "--cache", str(tmp_path / "cache"),
+               "--reports", str(reports), "--data", str(seq)])
+    captured = capsys.readouterr()
+    assert rc == 2
+    assert re.search(r"FAILED real/rgbd_dataset_freiburg3_broken static-dense: .*rgb", captured.out)
+    assert re.search(r"FAILED 10_depthcluster_clustering_and_masks: \w+", captured.out)
+    assert "run(s) and 1 notebook(s) failed" in captured.err and "left as it was" in captured.err
+    assert (reports / "tables" / "summary.md").read_text() == "earlier good run\n"
+    assert sorted(p.name for p in reports.rglob("*")) == ["summary.md", "tables"]
