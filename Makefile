@@ -5,12 +5,15 @@ VENV := .venv
 PY := $(VENV)/bin/python
 ARGS ?=
 
-.PHONY: reproduce test bench clean
+.PHONY: reproduce test bench lab clean
 
-$(VENV)/.installed: environment.txt
+# the package itself is installed editable: `python -m dynslam_lite` and `import dynslam_lite`
+# work from any folder, and notebooks opened in JupyterLab find it
+$(VENV)/.installed: environment.txt pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r environment.txt
+	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $@
 
 reproduce: $(VENV)/.installed  ## batch reproduction on the embedded synthetic default -> reports/
@@ -21,6 +24,9 @@ test: $(VENV)/.installed  ## the test suite
 
 bench: $(VENV)/.installed  ## speed and memory figures (ms/frame per stage, peak memory)
 	$(PY) -m dynslam_lite bench $(ARGS)
+
+lab: $(VENV)/.installed  ## JupyterLab on the notebooks (and reports/executed/) with the project's environment
+	$(VENV)/bin/jupyter lab --ServerApp.root_dir=$(CURDIR) $(ARGS) notebooks/README.md
 
 clean:
 	rm -rf build .pytest_cache

@@ -154,11 +154,15 @@ def evaluate(gt: Trajectory, est: Trajectory, max_diff: float = 0.02, delta_s: f
 
 @dataclass
 class MaskScores:
-    """Pixel scores of a predicted moving-object mask against ground truth."""
+    """Scores of a predicted moving-object mask (or dynamic-point labels) against ground truth,
+    with the counts they come from (true positives, false positives, false negatives)."""
 
     precision: float
     recall: float
     iou: float
+    tp: int = 0
+    fp: int = 0
+    fn: int = 0
 
     @classmethod
     def of(cls, predicted: np.ndarray, truth: np.ndarray) -> "MaskScores":
@@ -178,7 +182,19 @@ class MaskScores:
         precision = tp / (tp + fp) if tp + fp else 1.0
         recall = tp / (tp + fn) if tp + fn else 1.0
         iou = tp / (tp + fp + fn) if tp + fp + fn else 1.0
-        return cls(float(precision), float(recall), float(iou))
+        return cls(float(precision), float(recall), float(iou), int(tp), int(fp), int(fn))
+
+    @property
+    def counted(self) -> bool:
+        """Whether any pixel or point was predicted or true (the scores mean something)."""
+        return self.tp + self.fp + self.fn > 0
+
+
+def psnr(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> float:
+    """Peak signal-to-noise ratio (dB, peak 255) of 8-bit ``image`` against ``reference`` over
+    the pixels of ``mask`` (H, W) bool; capped at 90 dB for identical pixels."""
+    diff = image[mask].astype(float) - reference[mask].astype(float)
+    return float(10 * np.log10(255.0**2 / max(np.mean(diff**2), 1e-9)))
 
 
 def confusion(predicted: np.ndarray, truth: np.ndarray) -> np.ndarray:

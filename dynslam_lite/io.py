@@ -9,6 +9,7 @@ Every problem with the input raises :class:`SequenceError` naming the file and t
 """
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -74,31 +75,52 @@ def read_file_list(path: str | Path, min_columns: int = 2) -> list[tuple[float, 
     path = Path(path)
     if not path.is_file():
         raise SequenceError(f"{path}: file not found")
+    return parse_file_list(_read_text(path).splitlines(), path, min_columns)
+
+
+def _read_text(path: Path) -> str:
+    """A text list as UTF-8 (ASCII in practice); other encodings are named in the error."""
+    raw = path.read_bytes()
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" in raw[:4096]:
+        raise SequenceError(f"{path}: not a UTF-8 text file (UTF-16, judging by its bytes); "
+                            "save it as UTF-8 / ASCII as the TUM tools write it")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SequenceError(f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason})") from None
+
+
+def parse_file_list(lines, name, min_columns: int = 2) -> list[tuple[float, list[str]]]:
+    """:func:`read_file_list` on the lines of a text; ``name`` names it in errors."""
     entries: list[tuple[float, list[str]]] = []
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for lineno, raw in enumerate(f, start=1):
-            line = raw.replace(",", " ").replace("\t", " ").strip()
-            if not line or line.startswith("#"):
-                continue
-            cols = line.split()
-            try:
-                stamp = float(cols[0])
-            except ValueError:
-                if not entries and not any(c[0].isdigit() for c in cols):
-                    continue  # header line without '#', e.g. TUM fr1/xyz groundtruth.txt
-                raise SequenceError(
-                    f"{path}:{lineno}: expected a timestamp in seconds, got {cols[0]!r}"
-                ) from None
-            if len(cols) < min_columns:
-                raise SequenceError(
-                    f"{path}:{lineno}: expected at least {min_columns} columns, got {len(cols)}"
-                )
-            if entries and stamp <= entries[-1][0]:
-                raise SequenceError(
-                    f"{path}:{lineno}: timestamps not increasing ({stamp:.6f} after "
-                    f"{entries[-1][0]:.6f}); TUM lists are sorted by time"
-                )
-            entries.append((stamp, cols[1:]))
+    for lineno, raw in enumerate(lines, start=1):
+        line = raw.replace(",", " ").replace("\t", " ").strip()
+        if not line or line.startswith("#"):
+            continue
+        cols = line.split()
+        try:
+            stamp = float(cols[0])
+        except ValueError:
+            if not entries and not any(c[0].isdigit() for c in cols):
+                continue  # header line without '#', e.g. TUM fr1/xyz groundtruth.txt
+            raise SequenceError(
+                f"{name}:{lineno}: expected a timestamp in seconds, got {cols[0]!r}"
+            ) from None
+        if not math.isfinite(stamp):
+            raise SequenceError(f"{name}:{lineno}: timestamp {cols[0]!r} is not a finite number")
+        if len(cols) < min_columns:
+            raise SequenceError(
+                f"{name}:{lineno}: expected at least {min_columns} columns, got {len(cols)}"
+            )
+        if entries and stamp == entries[-1][0]:
+            raise SequenceError(f"{name}:{lineno}: timestamp {stamp:.6f} repeated from the line "
+                                "before; every line of a TUM list has its own time")
+        if entries and stamp < entries[-1][0]:
+            raise SequenceError(
+                f"{name}:{lineno}: timestamps not increasing ({stamp:.6f} after "
+                f"{entries[-1][0]:.6f}); TUM lists are sorted by time"
+            )
+        entries.append((stamp, cols[1:]))
     return entries
 
 
@@ -173,6 +195,10 @@ class Trajectory:
         """(N, 3) camera centres in the world frame (metres)."""
         return self.poses[:, :3, 3]
 
+    def nearest(self, t: float) -> np.ndarray:
+        """(4, 4) pose whose timestamp is nearest to ``t`` seconds."""
+        return self.poses[int(np.argmin(np.abs(self.timestamps - t)))]
+
 
 def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """(N, 4) quaternions (x, y, z, w) -> (N, 3, 3) rotations; normalises."""
@@ -199,15 +225,39 @@ def _matrix_to_quat(R: np.ndarray) -> np.ndarray:
 
 def read_trajectory(path: str | Path) -> Trajectory:
     """Read a TUM trajectory file ``timestamp tx ty tz qx qy qz qw`` (camera-to-world)."""
-    entries = read_file_list(path, min_columns=8)
+    path = Path(path)
+    if not path.is_file():
+        raise SequenceError(f"{path}: file not found")
+    return parse_trajectory(_read_text(path), path)
+
+
+def read_groundtruth(path: str | Path, bonn: bool | None = None) -> Trajectory:
+    """A ground-truth trajectory as camera-to-world poses: Bonn RGB-D Dynamic files (the marker's
+    pose; ``bonn`` None = when the folder name says bonn) are converted to the camera frame."""
+    path = Path(path)
+    gt = read_trajectory(path)
+    if bonn or (bonn is None and is_bonn(path.parent)):
+        gt = Trajectory(gt.timestamps, gt.poses @ bonn_marker_to_camera())
+    return gt
+
+
+def parse_trajectory(text: str, name) -> Trajectory:
+    """:func:`read_trajectory` on the text of a file; ``name`` names it in errors."""
+    entries = parse_file_list(text.splitlines(), name, min_columns=8)
     if not entries:
-        raise SequenceError(f"{path}: no poses in trajectory file")
+        raise SequenceError(f"{name}: no poses in trajectory file")
     try:
         values = np.array([[float(v) for v in cols[:7]] for _, cols in entries])
     except ValueError as exc:
-        raise SequenceError(f"{path}: non-numeric pose value ({exc})") from None
-    if not np.all(np.isfinite(values)):
-        raise SequenceError(f"{path}: non-finite pose values")
+        raise SequenceError(f"{name}: non-numeric pose value ({exc})") from None
+    bad = ~np.all(np.isfinite(values), axis=1)
+    if bad.any():
+        raise SequenceError(f"{name}: non-finite pose values at timestamp {entries[int(np.argmax(bad))][0]:.6f}")
+    qn = np.linalg.norm(values[:, 3:7], axis=1)
+    if np.any(np.abs(qn - 1.0) > 0.1):
+        k = int(np.argmax(np.abs(qn - 1.0) > 0.1))
+        raise SequenceError(f"{name}: pose at timestamp {entries[k][0]:.6f} has quaternion norm {qn[k]:.3g}, "
+                            "not a rotation (expected qx qy qz qw of norm 1)")
     poses = np.tile(np.eye(4), (len(values), 1, 1))
     poses[:, :3, :3] = _quat_to_matrix(values[:, 3:7])
     poses[:, :3, 3] = values[:, :3]
@@ -485,11 +535,14 @@ def open_sequence(
         )
     rgb_files = [root / rgb_list[i][1][0] for i, _ in matches]
     depth_files = [root / depth_list[j][1][0] for _, j in matches]
+    for listed, files in (("rgb.txt", rgb_files), ("depth.txt", depth_files)):
+        missing = [f for f in files if not f.is_file()]
+        if missing:
+            raise SequenceError(f"{root / listed}: {len(missing)} listed image(s) missing, first "
+                                f"{missing[0]}")
     gt = None
     if (root / "groundtruth.txt").is_file():
-        gt = read_trajectory(root / "groundtruth.txt")
-        if is_bonn(root):
-            gt = Trajectory(gt.timestamps, gt.poses @ bonn_marker_to_camera())
+        gt = read_groundtruth(root / "groundtruth.txt", is_bonn(root))
     masks = None
     if (root / "masks.txt").is_file():
         mlist = {round(t, 6): root / cols[0] for t, cols in read_file_list(root / "masks.txt")}

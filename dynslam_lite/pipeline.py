@@ -1,9 +1,10 @@
 """Run a method over a sequence: one entry point shared by the CLI, notebooks and tests.
 
-A method is a frame-to-frame tracker: ``track(ref, cur, T_init, timer) -> (T_cur_ref, ok,
-reason)``. The runner chains the relative poses into a camera-to-world trajectory (first frame
-at the identity), predicts with constant velocity, records failures instead of crashing, and
-times every stage.
+A method (:class:`dynslam_lite.tracking.Method`) tracks frame pairs: ``track(ref, cur, T_init,
+timer) -> Tracked``. The runner chains the relative poses into a camera-to-world trajectory
+(first frame at the identity), predicts with constant velocity, records failures instead of
+crashing, times every stage, scores the method's moving/dynamic verdicts against the ground-truth
+masks where the sequence has them, and returns every frame's outputs in :class:`RunResult`.
 """
 from __future__ import annotations
 
@@ -12,13 +13,15 @@ import resource
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Collection
 
 import numpy as np
 
-from .geometry import invert
+from .evaluation import MaskScores, confusion
+from .geometry import invert, sample_nearest
 from .timing import StageTimer
 from .io import Frame, RGBDSequence, Trajectory
+from .tracking import Labels, Method, Tracked
 from .bgrestore import BgRestoreMethod
 from .depthcluster import DepthClusterMethod
 from .features.method import StaticORBMethod
@@ -29,6 +32,31 @@ from .odometry.opencv_odometry import OpenCVOdometry, OpenCVOdometryConfig
 
 
 @dataclass
+class FrameOutput:
+    """What the runner recorded for one frame.
+
+    Attributes
+    ----------
+    index, timestamp : the frame
+    ok, reason : tracking of the pair ending at this frame (the first frame is always ok)
+    keyframe : the frame became a keyframe (keyframe-based methods)
+    ms : wall-clock milliseconds of the frame, loading included
+    stages : milliseconds per stage
+    detail : the method's record of the pair ending here (see :class:`Tracked`), kept only for
+        the frames asked for with ``run_method(..., keep=...)``
+    """
+
+    index: int
+    timestamp: float
+    ok: bool = True
+    reason: str = ""
+    keyframe: bool = False
+    ms: float = 0.0
+    stages: dict[str, float] = field(default_factory=dict)
+    detail: Any = None
+
+
+@dataclass
 class RunResult:
     """What a method produced on a sequence.
 
@@ -36,22 +64,42 @@ class RunResult:
     ----------
     method : str
     trajectory : Trajectory, camera-to-world at the colour timestamps
-    failed_frames : list of (frame index, reason): frames whose tracking failed; their pose
-        is the constant-velocity prediction
-    stage_ms : per stage, milliseconds of every frame
-    frame_ms : (N,) milliseconds per frame, whole pipeline (loading included)
+    frames : one :class:`FrameOutput` per frame
     peak_mem_mib : peak resident memory of the process (MiB)
     params : the parameters used
+    extras : the method's own statistics (:meth:`Method.extras`)
+    scores : the method's verdicts against ground truth, pooled over the frames that have it:
+        'pixels/NAME' (moving-pixel masks) and 'points/NAME' (dynamic keypoints), see :class:`Labels`
+    scored_points : keypoints scored in 'points/...'
     """
 
     method: str
     trajectory: Trajectory
-    failed_frames: list[tuple[int, str]] = field(default_factory=list)
-    stage_ms: dict[str, list[float]] = field(default_factory=dict)
-    frame_ms: list[float] = field(default_factory=list)
+    frames: list[FrameOutput] = field(default_factory=list)
     peak_mem_mib: float = 0.0
     params: dict[str, Any] = field(default_factory=dict)
     extras: dict[str, Any] = field(default_factory=dict)
+    scores: dict[str, MaskScores] = field(default_factory=dict)
+    scored_points: int = 0
+
+    @property
+    def failed_frames(self) -> list[tuple[int, str]]:
+        """(frame index, reason) of every frame whose tracking failed; its pose is the
+        constant-velocity prediction."""
+        return [(f.index, f.reason) for f in self.frames if not f.ok]
+
+    @property
+    def frame_ms(self) -> list[float]:
+        return [f.ms for f in self.frames]
+
+    @property
+    def stage_ms(self) -> dict[str, list[float]]:
+        """Per stage, milliseconds of every frame that ran it."""
+        out: dict[str, list[float]] = defaultdict(list)
+        for f in self.frames:
+            for k, v in f.stages.items():
+                out[k].append(v)
+        return dict(out)
 
     def stats(self) -> dict[str, Any]:
         """JSON-ready summary: frames, failed_frames, ms_per_frame, stages, peak_mem_mib."""
@@ -59,7 +107,7 @@ class RunResult:
             "method": self.method,
             "frames": len(self.trajectory),
             "failed_frames": [{"frame": i, "reason": r} for i, r in self.failed_frames],
-            "ms_per_frame": float(np.mean(self.frame_ms)) if self.frame_ms else 0.0,
+            "ms_per_frame": float(np.mean(self.frame_ms)) if self.frames else 0.0,
             "stages": {
                 k: {"mean_ms": float(np.mean(v)), "median_ms": float(np.median(v))}
                 for k, v in self.stage_ms.items()
@@ -67,10 +115,36 @@ class RunResult:
             "peak_mem_mib": self.peak_mem_mib,
             "params": self.params,
             **({"extras": self.extras} if self.extras else {}),
+            **({"scores": {k: dataclasses.asdict(v) for k, v in self.scores.items()}} if self.scores else {}),
         }
 
 
-class StaticDense:
+class _Scorer:
+    """Pools a method's :class:`Labels` against the ground-truth masks of the frames."""
+
+    def __init__(self):
+        self.counts: dict[str, np.ndarray] = {}
+        self.points = 0
+
+    def add(self, labels: Labels, frame: Frame) -> None:
+        if frame.mask is None:
+            return
+        for name, mask in labels.masks.items():
+            self._add(f"pixels/{name}", confusion(mask, frame.mask))
+        if labels.points:
+            truth = sample_nearest(frame.mask, labels.uv)
+            self.points += len(truth)
+            for name, dynamic in labels.points.items():
+                self._add(f"points/{name}", confusion(dynamic, truth))
+
+    def _add(self, key: str, c: np.ndarray) -> None:
+        self.counts[key] = self.counts.get(key, 0) + c
+
+    def scores(self) -> dict[str, MaskScores]:
+        return {k: MaskScores.from_counts(*map(int, c)) for k, c in self.counts.items()}
+
+
+class StaticDense(Method):
     """Method ``static-dense``: the dense solver over all valid pixels, no dynamic handling."""
 
     name = "static-dense"
@@ -79,15 +153,15 @@ class StaticDense:
     def __init__(self, camera, config: DenseConfig):
         self.camera, self.config = camera, config
 
-    def track(self, ref: Frame, cur: Frame, T_init, timer: StageTimer):
+    def track(self, ref: Frame, cur: Frame, T_init, timer: StageTimer) -> Tracked:
         with timer.stage("align"):
             r = align(ref.gray.astype(np.float32) / 255.0, ref.depth,
                       cur.gray.astype(np.float32) / 255.0, cur.depth,
                       self.camera, T_init, None, self.config)
-        return r.T_cur_ref, r.ok, r.reason
+        return Tracked(r.T_cur_ref, r.ok, r.reason)
 
 
-class OpenCVMethod:
+class OpenCVMethod(Method):
     """Method ``opencv-odometry``: ``cv2.Odometry`` RGB-D, frame to frame."""
 
     name = "opencv-odometry"
@@ -96,13 +170,13 @@ class OpenCVMethod:
     def __init__(self, camera, config: OpenCVOdometryConfig):
         self.odometry = OpenCVOdometry(camera, config)
 
-    def track(self, ref: Frame, cur: Frame, T_init, timer: StageTimer):
+    def track(self, ref: Frame, cur: Frame, T_init, timer: StageTimer) -> Tracked:
         with timer.stage("align"):
             T, ok = self.odometry.align(ref.gray, ref.depth, cur.gray, cur.depth)
-        return T, ok, "" if ok else "cv2.Odometry.compute returned False"
+        return Tracked(T, ok, "" if ok else "cv2.Odometry.compute returned False")
 
 
-METHODS: dict[str, type] = {
+METHODS: dict[str, type[Method]] = {
     m.name: m for m in (StaticDense, OpenCVMethod, DepthClusterMethod, StaticORBMethod,
                         WeightedStaticMethod, BgRestoreMethod)
 }
@@ -153,6 +227,7 @@ def run_method(
     progress: bool = False,
     masks: str = "none",
     on_frame: Callable[[int], None] | None = None,
+    keep: Collection[int] | None = None,
 ) -> RunResult:
     """Run ``method`` over every frame of ``seq``.
 
@@ -163,6 +238,9 @@ def run_method(
     params : overrides of the method's config fields
     progress : show a tqdm progress bar
     masks : semantic mask source for methods that use one (see :mod:`dynslam_lite.masks`)
+    on_frame : called with each frame index after it is tracked
+    keep : frame indices whose ``detail`` (the method's record of the pair ending there) is
+        kept in ``RunResult.frames``
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}: choose one of {', '.join(sorted(METHODS))}")
@@ -170,16 +248,16 @@ def run_method(
         raise ValueError(f"{seq.root}: empty sequence, nothing to track")
     cls = METHODS[method]
     config = make_config(cls.config_type, params)
-    if getattr(cls, "uses_masks", False):
+    if cls.uses_masks:
         tracker = cls(seq.camera, config, make_mask_source(masks))
     elif masks != "none":
         raise ValueError(f"method {method!r} does not use semantic masks (got --masks {masks})")
     else:
         tracker = cls(seq.camera, config)
+    keep = set(keep or ())
     poses = [np.eye(4)]
-    failed: list[tuple[int, str]] = []
-    stage_ms: dict[str, list[float]] = defaultdict(list)
-    frame_ms: list[float] = []
+    frames: list[FrameOutput] = []
+    scorer = _Scorer()
     velocity = np.eye(4)  # T_cur_ref of the last frame pair
     iterator = range(len(seq))
     if progress:
@@ -192,25 +270,32 @@ def run_method(
         t0 = time.perf_counter()
         with timer.stage("load"):
             cur = seq[i]
+        out = FrameOutput(i, float(seq.timestamps[i]))
         if ref is not None:
-            T, ok, reason = tracker.track(ref, cur, velocity, timer)
-            if not ok:
-                failed.append((i, reason))
+            tr = tracker.track(ref, cur, velocity, timer)
+            T = tr.T_cur_ref
+            if not tr.ok:
+                out.ok, out.reason = False, tr.reason
                 T = velocity  # constant-velocity prediction keeps the trajectory going
             velocity = T
             poses.append(poses[-1] @ invert(T))
+            out.keyframe = tr.keyframe
+            if tr.labels is not None:
+                scorer.add(tr.labels, ref if tr.labels.frame == ref.index else cur)
+            if i in keep:
+                out.detail = tr.detail
         ref = cur
-        frame_ms.append((time.perf_counter() - t0) * 1000.0)
-        for k, v in timer.frame.items():
-            stage_ms[k].append(v)
+        out.ms = (time.perf_counter() - t0) * 1000.0
+        out.stages = dict(timer.frame)
+        frames.append(out)
         if on_frame:
             on_frame(i)
-    if hasattr(tracker, "trajectory"):  # keyframe-based: final poses after bundle adjustment
-        poses = list(tracker.trajectory())
+    refined = tracker.refined_trajectory()
+    if refined is not None:  # keyframe-based: final poses after bundle adjustment
+        poses = list(refined)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
-    extras = tracker.extras() if hasattr(tracker, "extras") else {}
     return RunResult(
-        method, Trajectory(seq.timestamps.copy(), np.stack(poses)), failed, dict(stage_ms),
-        frame_ms, peak, {**dataclasses.asdict(config), **({"masks": masks} if masks != "none" else {})},
-        extras,
+        method, Trajectory(seq.timestamps.copy(), np.stack(poses)), frames, peak,
+        {**dataclasses.asdict(config), **({"masks": masks} if masks != "none" else {})},
+        tracker.extras(), scorer.scores(), scorer.points,
     )

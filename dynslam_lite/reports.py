@@ -1,9 +1,11 @@
 """Writing tables to ``reports/``: Markdown + CSV, stable names, all-or-nothing updates."""
 from __future__ import annotations
 
+import ast
 import csv
 import hashlib
 import io
+import json
 import math
 import os
 import shutil
@@ -36,17 +38,12 @@ def csv_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
     return buf.getvalue()
 
 
-def table_files(title: str, header, rows, notes: str = "", digits: int = 4) -> tuple[str, str]:
-    """(Markdown with title, table and notes; CSV) of one results table."""
-    md = f"# {title}\n\n" + markdown_table(header, rows, digits)
+def write_table(root: str | Path, rel_stem: str, title: str, header, rows, notes: str = "") -> None:
+    """Write ``root/rel_stem``.md (title, table, notes) and ``root/rel_stem``.csv."""
+    md = f"# {title}\n\n" + markdown_table(header, rows)
     if notes:
         md += "\n" + notes.strip() + "\n"
-    return md, csv_table(header, rows)
-
-
-def write_table(root: str | Path, rel_stem: str, title: str, header, rows, notes: str = "") -> None:
-    """Write ``root/rel_stem``.md and .csv (see :func:`table_files`)."""
-    md, csv_text = table_files(title, header, rows, notes)
+    csv_text = csv_table(header, rows)
     path = Path(root) / rel_stem
     path.parent.mkdir(parents=True, exist_ok=True)
     path.with_suffix(".md").write_text(md, encoding="utf-8")
@@ -57,13 +54,44 @@ def write_table(root: str | Path, rel_stem: str, title: str, header, rows, notes
 FINGERPRINTED = ("dynslam_lite/**/*.py", "notebooks/*.ipynb", "notebooks/reproduce.yaml")
 
 
+def _code_only(source: str) -> str:
+    """Python source as its syntax tree without docstrings: comments, docstrings, blank lines
+    and line breaks do not change it. Source that does not parse is taken as it is."""
+    try:
+        tree = ast.parse(source)
+    except SyntaxError:
+        return source
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                and body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree, annotate_fields=False)
+
+
+def _meaning(path: Path) -> str:
+    """What of a fingerprinted file can change the reports: Python code without comments and
+    docstrings; a notebook's code cells (not its Markdown); the registry's data (not comments)."""
+    text = path.read_text(encoding="utf-8")
+    if path.suffix == ".py":
+        return _code_only(text)
+    if path.suffix == ".ipynb":
+        cells = json.loads(text)["cells"]
+        return "\0".join(_code_only("".join(c["source"])) for c in cells if c["cell_type"] == "code")
+    import yaml
+
+    return json.dumps(yaml.safe_load(text), sort_keys=True)
+
+
 def code_fingerprint(repo: str | Path) -> str:
-    """sha256 over the files that produce the reports (:data:`FINGERPRINTED`), by relative path."""
+    """sha256 over what produces the reports (:data:`FINGERPRINTED`, by relative path): a
+    comment, docstring or Markdown edit keeps it, any change of code or parameters changes it."""
     repo = Path(repo)
     h = hashlib.sha256()
     files = sorted({p for pattern in FINGERPRINTED for p in repo.glob(pattern)} - {repo / "dynslam_lite/download.py"})
     for path in files:
-        h.update(path.relative_to(repo).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+        h.update(path.relative_to(repo).as_posix().encode() + b"\0" + _meaning(path).encode() + b"\0")
     return h.hexdigest()
 
 
@@ -86,12 +114,6 @@ class ReportWriter:
         path.write_text(text, encoding="utf-8")
         self.files.append(Path(rel))
         return path
-
-    def table(self, rel_stem: str, title: str, header, rows, notes: str = "", digits: int = 4):
-        """Write ``rel_stem``.md (title, table, notes) and ``rel_stem``.csv."""
-        md, csv_text = table_files(title, header, rows, notes, digits)
-        self.write_text(rel_stem + ".md", md)
-        self.write_text(rel_stem + ".csv", csv_text)
 
     def adopt_all(self) -> None:
         """Take every file written straight into the temporary folder (figures, notebooks)."""

@@ -1,24 +1,36 @@
 """Results tables in the papers' layouts: published columns (labelled) beside measured ones.
 
-Input is a list of evaluated runs as produced by the batch reproduction: dicts with
-``sequence`` ('synthetic/<scene>' or 'real/<folder>'), ``method``, ``frames``, ``ate_m``,
-``rpe_trans_m_per_s``, ``rpe_rot_deg_per_s`` (stat dicts) and optional ``extras``.
-Each function returns ``(header, rows, notes)`` for :meth:`dynslam_lite.reports.ReportWriter.table`.
+Input is the batch's evaluated runs (:class:`dynslam_lite.experiments.RunRecord`), looked up by
+sequence and run label; which runs exist is set in :mod:`dynslam_lite.experiments`. Each function
+returns ``(header, rows, notes)``; :func:`write_all` writes them all. Metrics are the attributes of
+:class:`dynslam_lite.evaluation.TrajectoryErrors`: ``ate`` (m), ``rpe_trans`` (m/s), ``rpe_rot_deg``.
 """
 from __future__ import annotations
 
+from . import experiments as E
 from . import published as P
+from .evaluation import ErrorStats, MaskScores
+from .experiments import RunRecord
 from .reports import fmt
 
 Table = tuple[list[str], list[list], str]
+Index = dict[tuple[str, str], RunRecord]
 
 
-def _index(results: list[dict]) -> dict[tuple[str, str], dict]:
-    return {(r["sequence"], r["method"]): r for r in results}
+def _index(results: list[RunRecord]) -> Index:
+    return {(r.sequence, r.label): r for r in results}
 
 
-def _real(results: list[dict]) -> list[str]:
-    return sorted({r["sequence"] for r in results if r["sequence"].startswith("real/")})
+def _real(results: list[RunRecord]) -> list[str]:
+    return sorted({r.sequence for r in results if r.is_real})
+
+
+def _labels(*runs: E.Run) -> tuple[str, ...]:
+    return tuple(r.label for r in runs)
+
+
+def _metric(r: RunRecord, metric: str) -> ErrorStats:
+    return getattr(r.errors, metric)
 
 
 def _real_head(idx, seq: str, methods) -> list:
@@ -27,30 +39,30 @@ def _real_head(idx, seq: str, methods) -> list:
 
 
 def _frames(idx, seq: str, methods) -> str:
-    n = {idx[(seq, m)]["frames"] for m in methods if (seq, m) in idx}
+    n = {idx[(seq, m)].frames for m in methods if (seq, m) in idx}
     return "/".join(str(x) for x in sorted(n)) or "-"
 
 
 def _get(idx, seq, method, metric, stat):
     r = idx.get((seq, method))
-    v = r[metric][stat] if r else None
+    v = getattr(_metric(r, metric), stat) if r else None
     return "-" if v is None else fmt(v, 4)
 
 
 def _stats(idx, seq, method, metric: str, keys: tuple[str, ...]) -> str:
     """Statistics ``keys`` of one measured metric joined by ' / ', '-' when not measured."""
     r = idx.get((seq, method))
-    return " / ".join(fmt(r[metric][k], 4) for k in keys) if r else "-"
+    return " / ".join(fmt(getattr(_metric(r, metric), k), 4) for k in keys) if r else "-"
 
 
 def _triple(idx, seq, method) -> str:
-    return _stats(idx, seq, method, "ate_m", ("max", "min", "rmse"))
+    return _stats(idx, seq, method, "ate", ("max", "min", "rmse"))
 
 
-PAPER_A_MEASURED = ("static-dense", "opencv-odometry", "depthcluster")
+PAPER_A_MEASURED = _labels(E.STATIC_DENSE, E.OPENCV_ODOMETRY, E.DEPTHCLUSTER)
 
 
-def paper_a_table1(results: list[dict]) -> Table:
+def paper_a_table1(results: list[RunRecord]) -> Table:
     """Paper A, Table 1: RPE RMSE (m/s | deg/s), published DVO/BaMVO/ref.[19]/paper A beside
     measured static-dense (our DVO-like baseline), opencv-odometry and depthcluster."""
     idx = _index(results)
@@ -66,13 +78,13 @@ def paper_a_table1(results: list[dict]) -> Table:
         seq = f"synthetic/{scene}" if scene else None
         rows.append(
             [name, seq or "- (no analogue)", _frames(idx, seq, ms) if seq else "-"]
-            + list(trans) + [_get(idx, seq, m, "rpe_trans_m_per_s", "rmse") for m in ms]
-            + list(rot) + [_get(idx, seq, m, "rpe_rot_deg_per_s", "rmse") for m in ms]
+            + list(trans) + [_get(idx, seq, m, "rpe_trans", "rmse") for m in ms]
+            + list(rot) + [_get(idx, seq, m, "rpe_rot_deg", "rmse") for m in ms]
         )
     for seq in _real(results):
         rows.append(_real_head(idx, seq, ms)
-                    + ["-"] * 4 + [_get(idx, seq, m, "rpe_trans_m_per_s", "rmse") for m in ms]
-                    + ["-"] * 4 + [_get(idx, seq, m, "rpe_rot_deg_per_s", "rmse") for m in ms])
+                    + ["-"] * 4 + [_get(idx, seq, m, "rpe_trans", "rmse") for m in ms]
+                    + ["-"] * 4 + [_get(idx, seq, m, "rpe_rot_deg", "rmse") for m in ms])
     notes = ("Published columns: the numbers printed in paper A (TUM sequences, full length). "
              "Measured columns: this project's code on the data in 'measured on' (synthetic = the "
              "embedded generator's analogue of the TUM sequence, not the TUM sequence itself), "
@@ -82,7 +94,7 @@ def paper_a_table1(results: list[dict]) -> Table:
     return header, rows, notes
 
 
-def paper_a_table2(results: list[dict]) -> Table:
+def paper_a_table2(results: list[RunRecord]) -> Table:
     """Paper A, Table 2: ATE max / min / RMSE (m) on the walking sequences."""
     idx = _index(results)
     ms = PAPER_A_MEASURED
@@ -104,18 +116,18 @@ def paper_a_table2(results: list[dict]) -> Table:
     return header, rows, notes
 
 
-def paper_a_masks(results: list[dict]) -> Table:
+def paper_a_masks(results: list[RunRecord]) -> Table:
     """Pixel precision / recall / IoU of depthcluster's moving-object masks (synthetic truth)."""
     header = ["sequence", "frames", "pre-removal P", "pre-removal R", "pre-removal IoU",
               "final P", "final R", "final IoU", "mean updates"]
     rows = []
     for r in results:
-        ex = r.get("extras") or {}
-        if r["method"] != "depthcluster" or "mask" not in ex:
+        fin = r.score("pixels/final")
+        if r.label != E.DEPTHCLUSTER.label or fin is None:
             continue
-        pre, fin = ex["preremoval_mask"], ex["mask"]
-        rows.append([r["sequence"], r["frames"], pre["precision"], pre["recall"], pre["iou"],
-                     fin["precision"], fin["recall"], fin["iou"], ex.get("mean_updates", "-")])
+        pre = r.scores.get("pixels/preremoval") or MaskScores.from_counts(0, 0, 0)
+        rows.append([r.sequence, r.frames, pre.precision, pre.recall, pre.iou,
+                     fin.precision, fin.recall, fin.iou, r.extras.get("mean_updates", "-")])
     notes = ("Pooled over all reference frames against the generator's ground-truth masks of the "
              "people. 'pre-removal' = step 2 alone (depth-change blocks), 'final' = after the "
              "background update. A pixel the person covers in the current frame but not in the "
@@ -127,30 +139,30 @@ def paper_a_masks(results: list[dict]) -> Table:
 def _reduction(idx, seq, metric, method, base) -> float | None:
     """RMSE reduction (%) of ``method`` against ``base`` on ``seq``; None when either is missing."""
     a, b = idx.get((seq, base)), idx.get((seq, method))
-    if not a or not b or not a[metric]["rmse"] or b[metric]["rmse"] is None:
+    if not a or not b or not _metric(a, metric).rmse or _metric(b, metric).rmse is None:
         return None
-    return 100.0 * (1.0 - b[metric]["rmse"] / a[metric]["rmse"])
+    return 100.0 * (1.0 - _metric(b, metric).rmse / _metric(a, metric).rmse)
 
 
 def _pct(value: float | None) -> str:
     return "-" if value is None else f"{value:.1f}"
 
 
-STATIC_BASELINES = ("static-dense", "static-orb")  # the papers' DVO and ORB-SLAM2 stand-ins
+STATIC_BASELINES = _labels(*E.STATIC_BASELINES)  # the papers' DVO and ORB-SLAM2 stand-ins
 
 
-def summary(results: list[dict]) -> Table:
+def summary(results: list[RunRecord]) -> Table:
     """Every method x every sequence: ATE RMSE, 1-s RPE, failed frames, and the RMSE reduction
     against the static baselines (the papers' headline percentages, measured)."""
     idx = _index(results)
     header = ["sequence", "frames", "method", "ATE RMSE (m)", "ATE max (m)", "ATE min (m)",
               "RPE trans RMSE (m/s)", "RPE rot RMSE (deg/s)", "failed frames"]
     header += [f"{m} reduction vs {b} (%)" for b in STATIC_BASELINES for m in ("ATE", "RPE")]
-    rows = [[r["sequence"], r["frames"], r["method"], r["ate_m"]["rmse"], r["ate_m"]["max"],
-             r["ate_m"]["min"], r["rpe_trans_m_per_s"]["rmse"], r["rpe_rot_deg_per_s"]["rmse"],
-             r["failed_frames"]]
-            + [_pct(_reduction(idx, r["sequence"], metric, r["method"], b)) if r["method"] != b else "-"
-               for b in STATIC_BASELINES for metric in ("ate_m", "rpe_trans_m_per_s")]
+    rows = [[r.sequence, r.frames, r.label, r.errors.ate.rmse, r.errors.ate.max,
+             r.errors.ate.min, r.errors.rpe_trans.rmse, r.errors.rpe_rot_deg.rmse,
+             r.failed_frames]
+            + [_pct(_reduction(idx, r.sequence, metric, r.label, b)) if r.label != b else "-"
+               for b in STATIC_BASELINES for metric in ("ate", "rpe_trans")]
             for r in results]
     notes = ("Measured by `python -m dynslam_lite reproduce` on the data named in the first column "
              "(synthetic = the embedded generator). ATE: SE(3)-aligned, 0.02 s association; RPE: "
@@ -163,7 +175,8 @@ def summary(results: list[dict]) -> Table:
 
 # --------------------------------------------------------------------------- paper B
 
-PAPER_B_MEASURED = ("static-orb", "weightedstatic")
+PAPER_B_MEASURED = _labels(E.STATIC_ORB, E.WEIGHTEDSTATIC)
+ORB, WS, BG = E.STATIC_ORB.label, E.WEIGHTEDSTATIC.label, E.BGRESTORE.label
 
 
 def _stats3(idx, seq, method, metric) -> str:
@@ -175,9 +188,9 @@ def _b_seq(name: str) -> str:
     return f"synthetic/{P.SYNTHETIC_ANALOGUE[P.B_SEQUENCES[name]]}"
 
 
-def _improvement(idx, seq, metric, method: str = "weightedstatic") -> str:
+def _improvement(idx, seq, metric, method: str = WS) -> str:
     """RMSE reduction (%) of ``method`` against static-orb, '-' when either is missing."""
-    return _pct(_reduction(idx, seq, metric, method, "static-orb"))
+    return _pct(_reduction(idx, seq, metric, method, ORB))
 
 
 def _paper_b_rpe_ate(results, table, metric, unit_note) -> Table:
@@ -185,14 +198,14 @@ def _paper_b_rpe_ate(results, table, metric, unit_note) -> Table:
     ms = PAPER_B_MEASURED
     header = ["sequence", "measured on", "frames", "ORB-SLAM2 (published) RMSE / median / S.D.",
               "paper B (published) RMSE / median / S.D.",
-              "static-orb (measured) RMSE / median / S.D.",
-              "weightedstatic (measured) RMSE / median / S.D.", "RMSE reduction % (measured)"]
+              f"{ORB} (measured) RMSE / median / S.D.",
+              f"{WS} (measured) RMSE / median / S.D.", "RMSE reduction % (measured)"]
     rows = []
     for name, (orb, paper) in table.items():
         seq = _b_seq(name)
         rows.append([name, seq, _frames(idx, seq, ms), " / ".join(map(str, orb)),
-                     " / ".join(map(str, paper)), _stats3(idx, seq, "static-orb", metric),
-                     _stats3(idx, seq, "weightedstatic", metric), _improvement(idx, seq, metric)])
+                     " / ".join(map(str, paper)), _stats3(idx, seq, ORB, metric),
+                     _stats3(idx, seq, WS, metric), _improvement(idx, seq, metric)])
     for seq in _real(results):
         rows.append(_real_head(idx, seq, ms) + ["-", "-"]
                     + [_stats3(idx, seq, m, metric) for m in ms] + [_improvement(idx, seq, metric)])
@@ -205,15 +218,15 @@ def _paper_b_rpe_ate(results, table, metric, unit_note) -> Table:
     return header, rows, notes
 
 
-def paper_b_table1(results: list[dict]) -> Table:
+def paper_b_table1(results: list[RunRecord]) -> Table:
     """Paper B, Table 1: ATE (m) RMSE / median / S.D., ORB-SLAM2 and paper B."""
-    return _paper_b_rpe_ate(results, P.B_TABLE1, "ate_m",
+    return _paper_b_rpe_ate(results, P.B_TABLE1, "ate",
                             "ATE after SE(3) alignment (evo, 0.02 s association), metres.")
 
 
-def paper_b_table2(results: list[dict]) -> Table:
+def paper_b_table2(results: list[RunRecord]) -> Table:
     """Paper B, Table 2: RPE (translation) RMSE / median / S.D."""
-    return _paper_b_rpe_ate(results, P.B_TABLE2, "rpe_trans_m_per_s",
+    return _paper_b_rpe_ate(results, P.B_TABLE2, "rpe_trans",
                             "RPE translation over 1-s pairs (m per second of motion; the paper "
                             "does not state its RPE interval).")
 
@@ -236,29 +249,29 @@ def _against_others(results, published: dict, others: tuple, measured: tuple, se
     return header, rows, notes
 
 
-def paper_b_table3(results: list[dict]) -> Table:
+def paper_b_table3(results: list[RunRecord]) -> Table:
     """Paper B, Table 3: ATE RMSE / S.D. of other systems (published) and ours (measured)."""
-    return _against_others(results, P.B_TABLE3, P.B_TABLE3_METHODS, PAPER_B_MEASURED, _b_seq, "ate_m",
+    return _against_others(results, P.B_TABLE3, P.B_TABLE3_METHODS, PAPER_B_MEASURED, _b_seq, "ate",
                            "S.D.", "ATE (m) after SE(3) alignment. Published: paper B's Table 3. "
                            "Measured: this project on the data in 'measured on'; the other systems "
                            "are not re-run here.")
 
 
-def paper_b_table4(results: list[dict]) -> Table:
+def paper_b_table4(results: list[RunRecord]) -> Table:
     """Paper B, Table 4: tracking time per frame, published (GPU) and measured (this CPU)."""
     header = ["system", "where", "total ms/frame", "stages (ms/frame)"]
     rows = [[name, "published, GTX 1650 GPU", total,
              ", ".join(f"{k} {v}" for k, v in stages.items()) or "-"]
             for name, (total, stages) in P.B_TABLE4.items()]
     for m in PAPER_B_MEASURED:
-        runs = [r for r in results if r["method"] == m and r.get("stages")]
-        synthetic = [r for r in runs if r["sequence"].startswith("synthetic/")]
-        real = [r for r in runs if not r["sequence"].startswith("synthetic/")]
-        picks = ([max(synthetic, key=lambda r: (r["frames"], r["sequence"] == "synthetic/walking_xyz"))]
+        runs = [r for r in results if r.label == m and r.stages]
+        synthetic = [r for r in runs if not r.is_real]
+        real = [r for r in runs if r.is_real]
+        picks = ([max(synthetic, key=lambda r: (r.frames, r.sequence == "synthetic/walking_xyz"))]
                  if synthetic else []) + real[:1]
         for r in picks:
-            stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stages"].items())
-            rows.append([m, f"measured, {r['sequence']}", f"{r['ms_per_frame']:.1f}", stages])
+            stages = ", ".join(f"{k} {v:.1f}" for k, v in r.stages.items())
+            rows.append([m, f"measured, {r.sequence}", f"{r.ms_per_frame:.1f}", stages])
     notes = ("Measured: mean milliseconds per frame of each stage during the reproduction run on "
              "this CPU (2 cores, other runs in parallel, machine-dependent; "
              "`python -m dynslam_lite bench --methods static-orb weightedstatic` measures alone). "
@@ -270,27 +283,13 @@ def paper_b_table4(results: list[dict]) -> Table:
     return header, rows, notes
 
 
-ABLATION = (
-    ("static-orb", "no masks (static-orb)"),
-    ("static-orb[oracle]", "masks only, oracle"),
-    ("static-orb[oracle:degraded]", "masks only, degraded"),
-    ("static-orb[person]", "masks only, person model"),
-    ("weightedstatic[oracle:degraded,geometry]", "degraded masks + geometric test"),
-    ("weightedstatic[oracle:degraded,weights]", "degraded masks + weights"),
-    ("weightedstatic[oracle:degraded]", "degraded masks + geometric test + weights"),
-    ("weightedstatic", "oracle (synthetic) / person model (real) masks + geometric test + weights"),
-    ("weightedstatic[none]", "no masks, geometric test + weights"),
-)
-
-
-def paper_b_ablation(results: list[dict]) -> Table:
+def paper_b_ablation(results: list[RunRecord]) -> Table:
     """What the geometric test and the weights add over semantic masks alone (ATE RMSE, m)."""
     idx = _index(results)
-    seqs = sorted({r["sequence"] for r in results
-                   if r["method"] in ("weightedstatic[oracle:degraded]", "weightedstatic[none]")})
+    seqs = sorted({r.sequence for r in results if r.label in _labels(E.WS_DEGRADED, E.WS_NONE)})
     header = ["configuration", "run label"] + seqs
-    rows = [[desc, label] + [_get(idx, s, label, "ate_m", "rmse") for s in seqs]
-            for label, desc in ABLATION if any((s, label) in idx for s in seqs)]
+    rows = [[run.description, run.label] + [_get(idx, s, run.label, "ate", "rmse") for s in seqs]
+            for run in E.PAPER_B_ABLATION if any((s, run.label) in idx for s in seqs)]
     notes = ("ATE RMSE (m), measured. 'oracle' = the generator's ground-truth person masks; "
              "'degraded' = the same, randomly dilated/eroded, dropped in 10 % of frames, with false "
              "blobs in 10 % of frames (`--masks oracle:degraded`), imitating a real network; "
@@ -302,21 +301,20 @@ def paper_b_ablation(results: list[dict]) -> Table:
     return header, rows, notes
 
 
-def paper_b_points(results: list[dict]) -> Table:
+def paper_b_points(results: list[RunRecord]) -> Table:
     """Precision / recall of the dynamic-point classification against ground truth."""
     header = ["sequence", "run", "frames", "matches", "dynamic matches (truth)",
               "geometric test P", "geometric test R", "geometric false alarms",
               "weights P", "weights R", "weights false alarms"]
     rows = []
     for r in results:
-        ex = r.get("extras") or {}
-        g, w = ex.get("dynamic_points_geometric"), ex.get("dynamic_points_weights")
-        if not r["method"].startswith("weightedstatic") or not g:
+        g, w = r.score("points/geometric"), r.score("points/weights")
+        if r.method != "weightedstatic" or not g:
             continue
-        n, dyn = ex.get("matches", 0), g["tp"] + g["fn"]
-        alarm = (lambda c: f"{c['fp']} ({100.0 * c['fp'] / max(n - dyn, 1):.1f} %)")
-        pr = (lambda c: [c["precision"], c["recall"]] if c and dyn else ["-", "-"])  # no truth: no P/R
-        rows.append([r["sequence"], r["method"], r["frames"], n, dyn, *pr(g), alarm(g), *pr(w),
+        n, dyn = r.scored_points, g.tp + g.fn
+        alarm = (lambda c: f"{c.fp} ({100.0 * c.fp / max(n - dyn, 1):.1f} %)")
+        pr = (lambda c: [c.precision, c.recall] if c and dyn else ["-", "-"])  # no truth: no P/R
+        rows.append([r.sequence, r.label, r.frames, n, dyn, *pr(g), alarm(g), *pr(w),
                      alarm(w) if w else "-"])
     notes = ("Over the matched semantic-static points of every frame: a point is truly dynamic when "
              "the ground-truth mask covers its keypoint. 'geometric test' = delta >= sigma2 "
@@ -327,7 +325,7 @@ def paper_b_points(results: list[dict]) -> Table:
     return header, rows, notes
 
 
-PAPER_C_MEASURED = ("static-orb", "bgrestore")
+PAPER_C_MEASURED = _labels(E.STATIC_ORB, E.BGRESTORE)
 C_MASKS = ("bgrestore uses the ground-truth instance masks ('oracle') on synthetic data and the "
            "bundled MediaPipe person model ('person', a stand-in for the paper's Mask R-CNN) on "
            "real data.")
@@ -337,25 +335,25 @@ def _c_seq(name: str) -> str:
     return f"synthetic/{P.SYNTHETIC_ANALOGUE[P.C_ANALOGUE[name]]}"
 
 
-def paper_c_table1(results: list[dict]) -> Table:
+def paper_c_table1(results: list[RunRecord]) -> Table:
     """Paper C, Table 1: ATE (m) RMSE / Mean / SD of ORB-SLAM2 and BR-SLAM, and the reduction."""
     idx = _index(results)
     ms = PAPER_C_MEASURED
     header = ["sequence", "measured on", "frames", "ORB-SLAM2 (published) RMSE / Mean / SD",
-              "BR-SLAM (published) RMSE / Mean / SD", "static-orb (measured) RMSE / Mean / SD",
-              "bgrestore (measured) RMSE / Mean / SD", "RMSE reduction % (measured)"]
+              "BR-SLAM (published) RMSE / Mean / SD", f"{ORB} (measured) RMSE / Mean / SD",
+              f"{BG} (measured) RMSE / Mean / SD", "RMSE reduction % (measured)"]
 
     def cell(seq, m):
-        return _stats(idx, seq, m, "ate_m", ("rmse", "mean", "std"))
+        return _stats(idx, seq, m, "ate", ("rmse", "mean", "std"))
 
     def gain(seq):
-        return _improvement(idx, seq, "ate_m", "bgrestore")
+        return _improvement(idx, seq, "ate", BG)
 
     rows = [[name, _c_seq(name), _frames(idx, _c_seq(name), ms), " / ".join(map(str, orb)),
-             " / ".join(map(str, paper)), cell(_c_seq(name), "static-orb"),
-             cell(_c_seq(name), "bgrestore"), gain(_c_seq(name))]
+             " / ".join(map(str, paper)), cell(_c_seq(name), ORB),
+             cell(_c_seq(name), BG), gain(_c_seq(name))]
             for name, (orb, paper) in P.C_TABLE1.items()]
-    rows += [_real_head(idx, seq, ms) + ["-", "-", cell(seq, "static-orb"), cell(seq, "bgrestore"), gain(seq)]
+    rows += [_real_head(idx, seq, ms) + ["-", "-", cell(seq, ORB), cell(seq, BG), gain(seq)]
              for seq in _real(results)]
     notes = ("ATE after SE(3) alignment (evo), metres. Published: paper C's Table 1 (TUM fr3, 5-run "
              "means). Measured: static-orb (this project's ORB-SLAM2-like frontend) in place of "
@@ -369,39 +367,39 @@ def _paper_c_other(results, table, metric, unit_note) -> Table:
                            + C_MASKS)
 
 
-def paper_c_table2(results: list[dict]) -> Table:
+def paper_c_table2(results: list[RunRecord]) -> Table:
     """Paper C, Table 2: ATE RMSE / SD against other systems."""
-    return _paper_c_other(results, P.C_TABLE2, "ate_m", "ATE (m) after SE(3) alignment.")
+    return _paper_c_other(results, P.C_TABLE2, "ate", "ATE (m) after SE(3) alignment.")
 
 
-def paper_c_table3(results: list[dict]) -> Table:
+def paper_c_table3(results: list[RunRecord]) -> Table:
     """Paper C, Table 3: relative translation error RMSE / SD."""
-    return _paper_c_other(results, P.C_TABLE3, "rpe_trans_m_per_s",
+    return _paper_c_other(results, P.C_TABLE3, "rpe_trans",
                           "RTE: measured over 1-s pairs (m per second); the paper does not state its "
                           "interval, so published and measured values may differ in scale.")
 
 
-def paper_c_table4(results: list[dict]) -> Table:
+def paper_c_table4(results: list[RunRecord]) -> Table:
     """Paper C, Table 4: relative rotation error RMSE / SD."""
-    return _paper_c_other(results, P.C_TABLE4, "rpe_rot_deg_per_s",
+    return _paper_c_other(results, P.C_TABLE4, "rpe_rot_deg",
                           "RRE (deg): measured over 1-s pairs (deg per second); the paper does not "
                           "state its interval.")
 
 
-def paper_c_restoration(results: list[dict]) -> Table:
+def paper_c_restoration(results: list[RunRecord]) -> Table:
     """How much of the removed area bgrestore restored from keyframes and by region growing."""
     header = ["sequence", "run", "frames", "removed px / frame", "restored from keyframes %",
               "depth by region growing %", "ATE RMSE (m)"]
     rows = []
     for r in results:
-        ex = r.get("extras") or {}
-        if not r["method"].startswith("bgrestore"):
+        ex = r.extras
+        if r.method != "bgrestore":
             continue
         removed = ex.get("removed_px_per_frame")
-        rows.append([r["sequence"], r["method"], r["frames"], "-" if removed is None else f"{removed:.0f}",
+        rows.append([r.sequence, r.label, r.frames, "-" if removed is None else f"{removed:.0f}",
                      "-" if removed is None else f"{100 * ex['restored_fraction']:.1f}",
                      "-" if removed is None else f"{100 * ex['depth_grown_fraction']:.1f}",
-                     r["ate_m"]["rmse"]])
+                     r.errors.ate.rmse])
     notes = ("Removed: the dilated instances judged dynamic (semantic + epipolar). Restored: removed "
              "pixels that received keyframe colour and depth (eq. 8-9); region growing: removed "
              "pixels no keyframe saw, given depth by 3-class Otsu region growing. Runs: "
@@ -411,9 +409,9 @@ def paper_c_restoration(results: list[dict]) -> Table:
     return header, rows, notes
 
 
-def timing(results: list[dict]) -> Table:
+def timing(results: list[RunRecord]) -> Table:
     """Wall-clock ms per frame of every run of the batch."""
-    rows = [[r["sequence"], r["method"], f"{r['ms_per_frame']:.1f}"] for r in results]
+    rows = [[r.sequence, r.label, f"{r.ms_per_frame:.1f}"] for r in results]
     notes = ("Wall-clock milliseconds per frame, whole pipeline, measured during the run on this "
              "machine with other jobs in parallel: varies between runs, unlike the error tables. "
              "`python -m dynslam_lite bench` measures per stage.")
@@ -441,7 +439,7 @@ REPORT_TABLES = (
 )
 
 
-def write_all(results: list[dict], root, source: str) -> list[str]:
+def write_all(results: list[RunRecord], root, source: str) -> list[str]:
     """Write every table of :data:`REPORT_TABLES` under ``root/tables`` (``source`` ends each
     table's notes: the command and data). Returns the stems written."""
     from .reports import write_table

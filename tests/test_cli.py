@@ -49,7 +49,7 @@ TIMED = ("timing", "paper_b_table4")  # wall-clock figures: the only tables that
 def _linked(readme: Path) -> list[str]:
     """Files a reports index links to, with whether they need the shared real data."""
     return [(m.group(1), "../shared/data" in line) for line in readme.read_text().splitlines()
-            for m in re.finditer(r"\]\(((?:tables|figures|trajectories)/[^)]+|provenance\.json)\)", line)]
+            for m in re.finditer(r"\]\(((?:tables|figures|trajectories|executed)/[^)]+|provenance\.json)\)", line)]
 
 
 def test_reproduce_tiny_writes_every_indexed_file_and_a_failed_run_keeps_reports(tmp_path, capsys):
@@ -102,7 +102,7 @@ def test_module_entry_point_help():
 def test_failed_run_and_failed_notebook_are_reported_and_reports_kept(tmp_path, capsys, monkeypatch):
     """A run that raises (an unreadable PNG mid-sequence) and a notebook that raises are both
     listed in the summary; the command fails and reports/ keeps what an earlier run wrote."""
-    import dynslam_lite.cli as cli
+    import dynslam_lite.batch as batch
 
     reports = tmp_path / "reports"
     (reports / "tables").mkdir(parents=True)
@@ -110,7 +110,7 @@ def test_failed_run_and_failed_notebook_are_reported_and_reports_kept(tmp_path, 
     seq = tmp_path / "rgbd_dataset_freiburg3_broken"
     assert main(["synth", str(seq), "--scene", "static_xyz", "--frames", "6", "--quiet"]) == 0
     sorted((seq / "rgb").iterdir())[3].write_bytes(b"not a png")
-    monkeypatch.setattr(cli, "load_registry", lambda: (
+    monkeypatch.setattr(batch, "load_registry", lambda: (
         {"tiny": {"scenes": ("static_xyz",), "frames": 6}},
         {"10_depthcluster_clustering_and_masks": {"tiny": {"frames": 6, "scene": "no_such_scene"}}}))
     rc = main(["reproduce", "--profile", "tiny", "--jobs", "2", "--cache", str(tmp_path / "cache"),

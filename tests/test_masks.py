@@ -5,7 +5,8 @@ import pytest
 
 from dynslam_lite.evaluation import MaskScores
 from dynslam_lite.io import Frame, SequenceError, open_sequence
-from dynslam_lite.masks import FileMasks, make_mask_source, split_instances
+from dynslam_lite.imageops import split_instances
+from dynslam_lite.masks import FileMasks, make_mask_source
 
 
 def _frame(mask, index=0, t=100.0):

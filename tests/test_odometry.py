@@ -3,7 +3,7 @@ import pytest
 
 from conftest import FR2_DESK, need, render_clean
 from dynslam_lite.evaluation import evaluate
-from dynslam_lite.geometry import invert, se3_exp, se3_log
+from dynslam_lite.geometry import PinholeCamera, invert, se3_exp, se3_log
 from dynslam_lite.io import open_sequence
 from dynslam_lite.odometry import DenseConfig, OpenCVOdometry, align
 from dynslam_lite.pipeline import run_method
@@ -77,3 +77,28 @@ def test_opencv_odometry_direction_and_determinism():
     assert np.linalg.norm(T[:3, 3] - T_true[:3, 3]) < 0.3 * np.linalg.norm(T_true[:3, 3])
     T2, _ = od.align(f0.gray, f0.depth, f1.gray, f1.depth)
     assert np.array_equal(T, T2)
+
+
+def test_public_entry_points_reject_wrong_layouts_with_clear_errors():
+    from dynslam_lite.bgrestore import fill_depth_hole, restore_from_keyframes
+    from dynslam_lite.depthcluster import estimate_pair
+    from dynslam_lite.weightedstatic import weighted_geometric_test
+
+    cam = PinholeCamera(100.0, 100.0, 31.5, 23.5, 64, 48)
+    g8 = np.zeros((48, 64), np.uint8)
+    g = np.zeros((48, 64), np.float32)
+    d = np.ones((48, 64), np.float32)
+    with pytest.raises(ValueError, match="gray_ref .*float .*divide an 8-bit image by 255"):
+        align(g8, d, g, d, cam)
+    with pytest.raises(ValueError, match=r"gray_cur has values up to 255"):
+        align(g, d, g + 255, d, cam)
+    with pytest.raises(ValueError, match=r"depth_cur is \(24, 64\), expected \(48, 64\)"):
+        estimate_pair(g, d, g, d[:24], cam)
+    with pytest.raises(ValueError, match="depth_ref must be an .*metres.*divide by the depth scale"):
+        align(g, (d * 5000).astype(np.uint16), g, d, cam)
+    with pytest.raises(ValueError, match=r"rgb must be an \(H, W, 3\) uint8"):
+        restore_from_keyframes(cam, g, d, d > 0, np.eye(4), [])
+    with pytest.raises(ValueError, match="hole is"):
+        fill_depth_hole(d, np.zeros((4, 4), bool))
+    with pytest.raises(ValueError, match=r"uv_cur must be \(3, 2\)"):
+        weighted_geometric_test(cam, np.eye(3), np.zeros(3), np.zeros((3, 2)), np.ones(3), np.zeros((2, 2)), np.ones(2))

@@ -20,7 +20,7 @@ def test_committed_reports_come_from_the_current_code():
 
 def test_every_indexed_table_and_figure_is_committed():
     index = (REPORTS / "README.md").read_text()
-    linked = re.findall(r"\]\(((?:tables|figures|trajectories)/[^)]+|provenance\.json)\)", index)
+    linked = re.findall(r"\]\(((?:tables|figures|trajectories|executed)/[^)]+|provenance\.json)\)", index)
     assert len(linked) > 40
     missing = [rel for rel in linked if not (REPORTS / rel).exists()]
     assert not missing, missing
@@ -32,3 +32,23 @@ def test_every_indexed_table_and_figure_is_committed():
     prov = json.loads((REPORTS / "provenance.json").read_text())
     real = {r["sequence"] for r in runs if r["sequence"].startswith("real/")}
     assert real == {f"real/{Path(d).name}" for d in prov["data"]}  # the real-data rows, when run with --data
+
+
+def test_fingerprint_ignores_comments_docstrings_and_markdown_but_not_code(tmp_path):
+    import shutil
+
+    for d in ("dynslam_lite", "notebooks"):
+        shutil.copytree(ROOT / d, tmp_path / d, ignore=shutil.ignore_patterns("__pycache__"))
+    before = code_fingerprint(tmp_path)
+    geo = tmp_path / "dynslam_lite" / "geometry.py"
+    text = geo.read_text()
+    geo.write_text(text.replace('"""', '"""A reworded docstring. ', 1).replace("\nimport ", "\n# a comment\nimport ", 1))
+    nb = tmp_path / "notebooks" / "90_results_tables.ipynb"
+    cells = json.loads(nb.read_text())
+    cells["cells"][0]["source"].append("\nAnother Markdown sentence.")
+    code = next(c for c in cells["cells"] if c["cell_type"] == "code" and "parameters" not in c["metadata"].get("tags", []))
+    code["source"].insert(0, "# a comment in a code cell\n")
+    nb.write_text(json.dumps(cells))
+    assert code_fingerprint(tmp_path) == before
+    geo.write_text(text.replace("def hat(", "def hat_(", 1))
+    assert code_fingerprint(tmp_path) != before

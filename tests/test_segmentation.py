@@ -5,7 +5,8 @@ import pytest
 
 from conftest import BONN_CROWD, need
 from dynslam_lite.io import Frame, open_sequence
-from dynslam_lite.masks import make_mask_source, split_instances
+from dynslam_lite.imageops import split_instances
+from dynslam_lite.masks import make_mask_source
 from dynslam_lite.segmentation import selfie
 
 onnx = pytest.importorskip("onnx", reason="the onnx package builds the test models")

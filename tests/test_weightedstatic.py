@@ -99,6 +99,6 @@ def test_weightedstatic_beats_static_orb_5x_on_walking(walking):
 
 
 def test_weightedstatic_reports_dynamic_point_scores(walking):
-    ex = walking["deg"][1].extras
-    g = ex["dynamic_points_geometric"]
-    assert ex["matches"] > 1000 and 0.0 <= g["precision"] <= 1.0 and g["tp"] + g["fn"] > 0
+    r = walking["deg"][1]
+    g = r.scores["points/geometric"]
+    assert r.scored_points > 1000 and 0.0 <= g.precision <= 1.0 and g.tp + g.fn > 0

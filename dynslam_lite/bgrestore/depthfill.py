@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from .. import checks
+
 KERNEL8 = np.ones((3, 3), np.uint8)
 
 
@@ -141,6 +143,8 @@ def fill_depth_hole(depth: np.ndarray, hole: np.ndarray, z_max: float = 8.0, td:
     object's depth in the hole included (it is class C0); only pixels outside the hole are
     sources.
     """
+    checks.depth("depth", depth)
+    checks.mask("hole", hole, depth.shape)
     gray = depth_to_gray(depth, z_max)
     known = (gray > 0) & ~hole
     if not known.any() or not hole.any():

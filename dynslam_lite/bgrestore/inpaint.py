@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .. import checks
 from ..geometry import PinholeCamera, backproject
 
 
@@ -134,6 +135,10 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
     (relative) of the nearest are used: the paper has no visibility test, without one a
     foreground edge seen from another keyframe would bleed into the background behind it.
     """
+    checks.rgb8("rgb", rgb)
+    checks.depth("depth", depth, rgb.shape[:2])
+    checks.mask("hole", hole, rgb.shape[:2])
+    checks.pose("T_w_cur", T_w_cur)
     H, W = hole.shape
     pts = []
     if hole.any():

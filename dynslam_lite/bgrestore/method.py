@@ -26,8 +26,8 @@ import numpy as np
 from ..features import FeatureTracker, FrontendConfig, extract
 from ..features.method import FrontendMethod
 from ..geometry import invert, sample_nearest
-from ..masks import dilate, union
-from ..timing import StageTimer
+from ..imageops import dilate, union
+from ..tracking import Labels, Tracked
 from .depthfill import fill_depth_hole
 from .inpaint import KeyframeImage, restore_from_keyframes
 from .removal import Removal, RemovalConfig, decide_removal
@@ -77,19 +77,18 @@ class FrameRestoration:
 
 
 class BgRestoreMethod(FrontendMethod):
-    """Method ``bgrestore``; ``extras`` reports how much of the removed area was restored."""
+    """Method ``bgrestore``. Each frame's detail is its :class:`FrameRestoration`, its labels the
+    removed region ('removed'); ``extras`` reports how much of the removed area was restored."""
 
     name = "bgrestore"
     config_type = BgRestoreConfig
 
-    def __init__(self, camera, config: BgRestoreConfig, masks=None, keep: set[int] | None = None):
+    def __init__(self, camera, config: BgRestoreConfig, masks=None):
         super().__init__(camera, config.frontend, masks)
         self.config = config
         self.camera = camera
         self.past_feats: deque = deque(maxlen=max(config.removal.frame_gap, 1))
         self.kf_images: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self.keep = keep or set()
-        self.restorations: dict[int, FrameRestoration] = {}  # frame index -> restoration, for keep
         self.area = np.zeros(3)  # removed, restored, grown pixels over the run
 
     def _keyframe_images(self) -> list[KeyframeImage]:
@@ -97,11 +96,10 @@ class BgRestoreMethod(FrontendMethod):
         ids = [k for k in range(max(0, len(kfs) - self.config.keyframes), len(kfs)) if k in self.kf_images]
         return [KeyframeImage(*self.kf_images[k][:2], invert(kfs[k].T_c_w), self.kf_images[k][2]) for k in ids]
 
-    def process(self, frame, timer=None):
+    def prepare(self, frame, instances, timer):
+        """Steps 1-3: remove, restore from keyframes, grow depth; the frontend then tracks the
+        restored frame without keypoints where nothing could be restored."""
         cfg = self.config
-        timer = timer or StageTimer()
-        with timer.stage("masks"):
-            instances = self.masks(frame)
         with timer.stage("removal"):
             feats = extract(frame.gray, frame.depth, cfg.frontend.orb)
             prev = self.past_feats[0] if self.past_feats else None  # frame_gap frames back
@@ -129,24 +127,26 @@ class BgRestoreMethod(FrontendMethod):
                     depth, grown = fill.depth, fill.filled
         left = hole & ~restored  # no keyframe saw behind: no keypoints there
         depth = np.where(left & ~grown, 0.0, depth).astype(np.float32)
-        tf = self.tracker.process(replace(frame, rgb=rgb, depth=depth), left, timer, T_init)
+        record = (instances, FrameRestoration(removal, restored, grown, rgb, depth), left)
+        return replace(frame, rgb=rgb, depth=depth), left, T_init, record
+
+    def tracked(self, frame, tf, record) -> Tracked:
+        instances, rec, left = record
         if tf.keyframe:
             n = len(self.tracker.keyframes)
             people = union(instances)
-            lent = left if people is None else left | dilate(people, cfg.removal.dilate_px)
-            self.kf_images[n - 1] = (rgb, depth, lent)
-            for k in [k for k in self.kf_images if k < n - cfg.keyframes]:  # only the latest are used
+            lent = left if people is None else left | dilate(people, self.config.removal.dilate_px)
+            self.kf_images[n - 1] = (rec.rgb, rec.depth, lent)
+            for k in [k for k in self.kf_images if k < n - self.config.keyframes]:  # only the latest are used
                 del self.kf_images[k]
-        self.area += [hole.sum(), restored.sum(), grown.sum()]
-        if frame.index in self.keep:
-            self.restorations[frame.index] = FrameRestoration(removal, restored, grown, rgb, depth)
-        self.frames.append(tf)
-        return tf
+        self.area += [rec.removal.mask.sum(), rec.restored.sum(), rec.grown.sum()]
+        return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe,
+                       Labels(frame.index, {"removed": rec.removal.mask}), rec)
 
     def extras(self) -> dict:
         out = super().extras()
         if self.area[0]:
-            out["removed_px_per_frame"] = float(self.area[0] / max(len(self.frames), 1))
+            out["removed_px_per_frame"] = float(self.area[0] / max(self.n_frames, 1))
             out["restored_fraction"] = float(self.area[1] / self.area[0])
             out["depth_grown_fraction"] = float(self.area[2] / self.area[0])
         return out

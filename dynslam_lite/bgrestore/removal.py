@@ -18,7 +18,7 @@ import numpy as np
 
 from ..features import Features, match_descriptors
 from ..geometry import epipolar_distance, sample_nearest
-from ..masks import dilate
+from ..imageops import dilate
 
 
 @dataclass

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from ..geometry import PinholeCamera, interpolate, warp_coordinates
-from ..masks import dilate
+from ..imageops import dilate
 from .clustering import grow_to_components
 
 

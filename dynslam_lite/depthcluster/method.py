@@ -18,10 +18,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..evaluation import MaskScores, confusion
+from ..checks import depth as check_depth, image01
 from ..geometry import PinholeCamera, rotation_angle_deg, warp_coordinates
 from ..odometry.dense import DenseConfig, align
-from ..masks import disk
+from ..tracking import Labels, Method, Tracked
+from ..imageops import disk
 from .background import OutlierConfig, outliers, residuals
 from .clustering import DepthClusters, cluster_depth, layer_components
 from .preremoval import PreRemoval, PreRemovalConfig, pre_remove
@@ -141,6 +142,10 @@ def estimate_pair(
     record : keep the residual image of every iteration (notebooks)
     timer : optional :class:`dynslam_lite.pipeline.StageTimer`
     """
+    image01("gray_ref", gray_ref)
+    image01("gray_cur", gray_cur, gray_ref.shape)
+    check_depth("depth_ref", depth_ref, gray_ref.shape)
+    check_depth("depth_cur", depth_cur, gray_ref.shape)
     cfg = config or DepthClusterConfig()
     stage = timer.stage if timer is not None else (lambda name: nullcontext())
     with stage("cluster"):
@@ -226,12 +231,12 @@ def propagate_mask(moving: np.ndarray, depth_ref: np.ndarray, camera: PinholeCam
     return cv2.dilate(cv2.morphologyEx(out, cv2.MORPH_CLOSE, k), k).astype(bool)
 
 
-class DepthClusterMethod:
+class DepthClusterMethod(Method):
     """Method ``depthcluster`` for :func:`dynslam_lite.pipeline.run_method`.
 
     Clusters every frame once (the current frame's layers are the next pair's reference
-    layers) and, on synthetic sequences, pools the mask scores against the ground truth of the
-    reference frames (:meth:`extras`).
+    layers). Each pair's labels are the final moving mask and the pre-removal mask of the
+    reference frame ('final', 'preremoval'); its detail is the :class:`PairResult`.
     """
 
     name = "depthcluster"
@@ -241,8 +246,6 @@ class DepthClusterMethod:
         self.camera, self.config = camera, config
         self._cache: tuple[float, DepthClusters] | None = None
         self._prior: tuple[float, np.ndarray] | None = None
-        self._counts = np.zeros(3, np.int64)  # tp, fp, fn
-        self._pre_counts = np.zeros(3, np.int64)
         self.iterations_used: list[int] = []
 
     def _clusters(self, frame) -> DepthClusters:
@@ -252,7 +255,7 @@ class DepthClusterMethod:
         self._cache = (frame.timestamp, c)
         return c
 
-    def track(self, ref, cur, T_init, timer):
+    def track(self, ref, cur, T_init, timer) -> Tracked:
         with timer.stage("cluster"):
             c_ref = self._clusters(ref)
             c_cur = self._clusters(cur)
@@ -267,16 +270,11 @@ class DepthClusterMethod:
                 self._prior = (cur.timestamp, propagate_mask(res.moving, ref.depth, self.camera,
                                                              res.T_cur_ref))
         self.iterations_used.append(len(res.iterations) - 1)
-        if ref.mask is not None:
-            self._counts += confusion(res.moving, ref.mask)
-            if res.preremoval is not None:
-                self._pre_counts += confusion(res.preremoval.mask, ref.mask)
-        return res.T_cur_ref, res.ok, res.reason
+        labels = Labels(ref.index, {"final": res.moving})
+        if res.preremoval is not None:
+            labels.masks["preremoval"] = res.preremoval.mask
+        return Tracked(res.T_cur_ref, res.ok, res.reason, labels=labels, detail=res)
 
     def extras(self) -> dict:
-        out = {"mean_updates": float(np.mean(self.iterations_used)) if self.iterations_used else 0.0}
-        if self._counts.any():
-            out["mask"] = dataclasses.asdict(MaskScores.from_counts(*map(int, self._counts)))
-            out["preremoval_mask"] = dataclasses.asdict(MaskScores.from_counts(*map(int, self._pre_counts)))
-        return out
+        return {"mean_updates": float(np.mean(self.iterations_used)) if self.iterations_used else 0.0}
 

@@ -8,16 +8,20 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import invert
-from ..masks import NoMasks, union
+from ..imageops import union
+from ..masks import NoMasks
 from ..timing import StageTimer
-from .frontend import FeatureTracker, FrontendConfig
+from ..tracking import Method, Tracked
+from .frontend import FeatureTracker, FrontendConfig, TrackedFrame
 
 
-class FrontendMethod:
+class FrontendMethod(Method):
     """Adapter from a :class:`FeatureTracker` to the runner's frame-pair interface.
 
-    The runner calls ``track(ref, cur, ...)``; the frontend sees each frame once, in order, and
-    its keyframe-refined poses replace the chained ones at the end (``trajectory``).
+    The runner calls ``track(ref, cur, ...)``; the frontend sees each frame once, in order
+    (:meth:`process`), and its keyframe-refined poses replace the chained ones at the end.
+    Subclasses change what the frontend sees with :meth:`prepare` (paper C restores the frame)
+    and what a frame reports with :meth:`tracked` (paper B labels its dynamic points).
     """
 
     uses_masks = True
@@ -26,25 +30,37 @@ class FrontendMethod:
     def __init__(self, camera, config, masks=None):
         self.masks = masks or NoMasks()
         self.tracker = self.tracker_type(camera, config)
-        self.frames = []  # TrackedFrame per frame, for inspection
+        self.n_frames = 0
 
-    def process(self, frame, timer=None):
-        """Track one frame (all frames, in order); ``timer`` collects ms per stage."""
+    def process(self, frame, timer: StageTimer | None = None) -> Tracked:
+        """Track one frame (all frames, in order); ``timer`` collects ms per stage.
+        ``T_cur_ref`` of the result is left to :meth:`track`."""
         timer = timer or StageTimer()
         with timer.stage("masks"):
             instances = self.masks(frame)
-        tf = self.tracker.process(frame, union(instances), timer)
-        self.frames.append(tf)
-        return tf
+        seen, exclude, T_init, record = self.prepare(frame, instances, timer)
+        tf = self.tracker.process(seen, exclude, timer, T_init)
+        self.n_frames += 1
+        return self.tracked(frame, tf, record)
 
-    def track(self, ref, cur, T_init, timer):
-        if not self.frames:
+    def prepare(self, frame, instances: list[np.ndarray], timer: StageTimer):
+        """(frame the frontend tracks, (H, W) bool keypoint exclusion or None, start pose or None,
+        record for :meth:`tracked`): here the frame as it is, without keypoints in the masks."""
+        return frame, union(instances), None, None
+
+    def tracked(self, frame, tf: TrackedFrame, record) -> Tracked:
+        """What the runner gets for ``frame``; the detail is the frontend's :class:`TrackedFrame`."""
+        return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe, detail=tf)
+
+    def track(self, ref, cur, T_init, timer) -> Tracked:
+        if self.tracker.T_last is None:
             self.process(ref, timer)
         T_ref = self.tracker.T_last
-        tf = self.process(cur, timer)
-        return self.tracker.T_last @ invert(T_ref), tf.ok, tf.reason
+        out = self.process(cur, timer)
+        out.T_cur_ref = self.tracker.T_last @ invert(T_ref)
+        return out
 
-    def trajectory(self) -> np.ndarray:
+    def refined_trajectory(self) -> np.ndarray:
         return self.tracker.trajectory()
 
     def extras(self) -> dict:

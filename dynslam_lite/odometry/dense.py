@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..checks import depth as check_depth, image01, mask as check_mask, pose as check_pose
 from ..geometry import PinholeCamera, depth_pyramid, image_pyramid, interpolate, se3_exp
 
 
@@ -152,6 +153,14 @@ def align(
     -------
     DenseResult
     """
+    image01("gray_ref", gray_ref)
+    image01("gray_cur", gray_cur, gray_ref.shape)
+    check_depth("depth_ref", depth_ref, gray_ref.shape)
+    check_depth("depth_cur", depth_cur, gray_ref.shape)
+    if mask_ref is not None:
+        check_mask("mask_ref", mask_ref, gray_ref.shape)
+    if T_init is not None:
+        check_pose("T_init", T_init)
     cfg = config or DenseConfig()
     T = np.eye(4) if T_init is None else np.asarray(T_init, float).copy()
     gref = image_pyramid(gray_ref.astype(np.float32), cfg.levels)

@@ -3,7 +3,7 @@
 A stand-in for the papers' networks (paper B: YOLOv5s-seg, paper C: Mask R-CNN), which cannot be
 downloaded here. The model gives one person probability per pixel (no instances, no classes);
 instances are split by connected components and depth discontinuities
-(:func:`dynslam_lite.masks.split_instances`). It was trained for people within about 2 m of a
+(:func:`dynslam_lite.imageops.split_instances`). It was trained for people within about 2 m of a
 front camera: on real Bonn frames it finds walking people, also fires on some salient static
 objects (chairs), and misses strongly motion-blurred people; the papers' geometric checks are meant
 to handle both. The synthetic bodies are not photographs of people and it may not fire on them.
@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from ..io import Frame
-from ..masks import split_instances
+from ..imageops import split_instances
 
 MODEL_DIR = Path(__file__).resolve().parent / "models"
 MODELS = {  # variant -> (file, (width, height) of the input, sha256)

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import checks
 from ..geometry import PinholeCamera, backproject
 
 
@@ -91,6 +92,10 @@ def weighted_geometric_test(camera: PinholeCamera, R: np.ndarray, t: np.ndarray,
     uv_ref, uv_cur : (N, 2) pixels in the reference and current frames
     z_ref, z_cur : (N,) depth in metres, 0 = none
     """
+    checks.points("uv_ref", uv_ref)
+    checks.points("uv_cur", uv_cur, len(uv_ref))
+    if np.shape(z_ref) != (len(uv_ref),) or np.shape(z_cur) != (len(uv_ref),):
+        raise ValueError(f"z_ref {np.shape(z_ref)} and z_cur {np.shape(z_cur)} must be ({len(uv_ref)},) like uv_ref")
     cfg = config or GeometricConfig()
     R = np.broadcast_to(R, (len(uv_ref), 3, 3))
     t = np.broadcast_to(t, (len(uv_ref), 3))

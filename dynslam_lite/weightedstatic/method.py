@@ -18,13 +18,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..evaluation import MaskScores, confusion
 from ..features.frontend import Estimate, FeatureTracker, FrontendConfig
 from ..features.method import FrontendMethod
 from ..features.optimize import CHI2_STEREO, optimize_pose
-from ..geometry import invert, sample_nearest
+from ..geometry import invert
+from ..tracking import Labels, Tracked
 from .geometric import GeometricConfig, weighted_geometric_test
-from .weighted_ba import joint_pose_and_weights
+from .weighted_ba import initial_weights, joint_pose_and_weights
 
 
 @dataclass
@@ -104,7 +104,7 @@ class WeightedStaticTracker(FeatureTracker):
         else:
             delta = np.full(len(map_idx), np.nan)
             geo_dynamic = np.zeros(len(map_idx), bool)
-        phi0 = cfg.eta * 1.0 + cfg.omega * (~geo_dynamic)
+        phi0 = initial_weights(True, ~geo_dynamic, cfg.eta, cfg.omega)  # outside the masks: mask_seg = 1
         info = {"delta": delta, "geo_dynamic": geo_dynamic, "phi0": phi0, "T_first": first.T_c_w}
         if cfg.use_weights:
             jr = joint_pose_and_weights(self.camera, self.bf, first.T_c_w, P, obs, phi0, cfg.lam,
@@ -128,37 +128,19 @@ class WeightedStaticTracker(FeatureTracker):
 
 
 class WeightedStaticMethod(FrontendMethod):
-    """Method ``weightedstatic``; ``extras`` scores the dynamic-point classification against
-    the ground-truth masks (synthetic data): the geometric test, and the final weights
-    (phi < phi0 / 2 counted as dynamic)."""
+    """Method ``weightedstatic``. Each frame's labels are its matched keypoints judged dynamic by
+    the geometric test ('geometric') and by the final weights ('weights': phi < phi0 / 2)."""
 
     name = "weightedstatic"
     config_type = WeightedStaticConfig
     tracker_type = WeightedStaticTracker
 
-    def __init__(self, camera, config, masks=None):
-        super().__init__(camera, config, masks)
-        self.counts = {"geometric": np.zeros(3, int), "weights": np.zeros(3, int)}
-        self.matches = 0
-
-    def process(self, frame, timer=None):
-        tf = super().process(frame, timer)
+    def tracked(self, frame, tf, record) -> Tracked:
+        out = super().tracked(frame, tf, record)
         est = tf.estimate
-        if est is not None and frame.mask is not None and len(tf.kp_idx):
-            truth = sample_nearest(frame.mask, tf.feats.uv[tf.kp_idx])
-            self.matches += len(truth)
-            self.counts["geometric"] += confusion(est.info["geo_dynamic"], truth)
+        if est is not None and len(tf.kp_idx):
+            points = {"geometric": est.info["geo_dynamic"]}
             if "phi" in est.info:
-                self.counts["weights"] += confusion(est.info["phi"] < 0.5 * est.info["phi0"], truth)
-        return tf
-
-    def extras(self) -> dict:
-        out = super().extras()
-        if self.matches:
-            out["matches"] = self.matches
-        for k, c in self.counts.items():
-            if c.any():
-                s = MaskScores.from_counts(*map(int, c))
-                out[f"dynamic_points_{k}"] = {"precision": s.precision, "recall": s.recall,
-                                              "tp": int(c[0]), "fp": int(c[1]), "fn": int(c[2])}
+                points["weights"] = est.info["phi"] < 0.5 * est.info["phi0"]
+            out.labels = Labels(frame.index, uv=tf.feats.uv[tf.kp_idx], points=points)
         return out

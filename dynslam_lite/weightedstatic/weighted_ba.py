@@ -30,6 +30,15 @@ from ..features.optimize import CHI2_STEREO, Observations, pose_jacobian, residu
 from ..geometry import PinholeCamera, se3_exp
 
 
+
+def initial_weights(mask_seg, mask_geo, eta: float = 0.5, omega: float = 0.5) -> np.ndarray:
+    """Eq. 6: ``phi0 = eta * mask_seg + omega * mask_geo`` per point.
+
+    ``mask_seg``, ``mask_geo`` : (N,) bool or scalar, 1 where the semantic masks / the weighted
+    geometric test call the point static; eta + omega = 1 (0.5 each in the paper).
+    """
+    return eta * np.asarray(mask_seg, float) + omega * np.asarray(mask_geo, float)
+
 @dataclass
 class JointResult:
     """Result of :func:`joint_pose_and_weights`.

@@ -1,0 +1,336 @@
+"""The batch reproduction: plan, run, score, write every report (``python -m dynslam_lite reproduce``).
+
+1. plan: the profile's synthetic scenes (``notebooks/reproduce.yaml``) and the real sequences
+   given, each with its runs from :mod:`dynslam_lite.experiments`;
+2. run: scenes generated and runs tracked and scored in worker processes (:func:`worker_pool`),
+   each estimated trajectory scored as written (:func:`evaluate_run`);
+3. report: tables, trajectories and ``runs.json``, the notebooks executed with papermill
+   (notebook 90 scores the trajectories again and writes the tables), provenance and the index,
+   all in a temporary folder first: ``reports/`` changes only when everything succeeded.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import shutil
+import time
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import experiments, tables
+from .evaluation import evaluate
+from .experiments import Run, RunRecord
+from .io import format_trajectory, open_sequence, parse_trajectory
+from .pipeline import run_method
+from .reports import ReportWriter, code_fingerprint, fmt
+from .synth import SCENES, ensure_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+NOTEBOOK_DIR = ROOT / "notebooks"
+REGISTRY = NOTEBOOK_DIR / "reproduce.yaml"
+DEFAULT_CACHE = Path("build") / "data"
+
+
+@dataclass
+class Options:
+    """What to reproduce (the ``reproduce`` command's arguments)."""
+
+    profile: str = "full"
+    frames: int | None = None  # overrides the profile's frame count
+    data: list[str] = field(default_factory=list)  # real TUM/Bonn sequence folders
+    seed: int = 0
+    jobs: int = 2
+    cache: str = str(DEFAULT_CACHE)
+    reports: str = "reports"
+    notebooks: bool = True
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run on one sequence: ``sequence`` is 'synthetic/<scene>' or 'real/<folder>'."""
+
+    sequence: str
+    path: str
+    run: Run
+
+    @property
+    def kind(self) -> str:
+        return self.sequence.split("/", 1)[0]
+
+
+@dataclass
+class Done:
+    """A run that finished: its record, the trajectory text it was scored on, its time."""
+
+    record: RunRecord
+    trajectory: str
+    seconds: float
+
+
+@dataclass
+class Failure:
+    """A run that raised: reported in the summary instead of ending the batch."""
+
+    job: Job
+    error: str
+    seconds: float
+
+
+def load_registry(path: Path = REGISTRY) -> tuple[dict, dict]:
+    """(profiles, notebooks) of the reproduction registry (``notebooks/reproduce.yaml``)."""
+    import yaml
+
+    try:
+        reg = yaml.safe_load(path.read_text(encoding="utf-8"))
+        profiles, notebooks = reg["profiles"], reg["notebooks"]
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a readable reproduction registry ({exc})") from exc
+    for prof in profiles.values():
+        prof["scenes"] = tuple(SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
+    for name, params in notebooks.items():
+        if not (NOTEBOOK_DIR / f"{name}.ipynb").exists():
+            raise ValueError(f"{path}: notebook {name}.ipynb does not exist")
+        if set(params) != set(profiles):
+            raise ValueError(f"{path}: notebook {name} needs parameters for every profile {sorted(profiles)}")
+    return profiles, notebooks
+
+
+def plan(scene_paths: dict[str, str], data: list[str]) -> list[Job]:
+    """Every job, synthetic scenes first, in registry order (the tables' row order)."""
+    jobs = [Job(f"synthetic/{scene}", path, run)
+            for scene, path in scene_paths.items() for run in experiments.runs_for("synthetic", scene)]
+    jobs += [Job(f"real/{Path(d).resolve().name}", d, run) for d in data for run in experiments.runs_for("real")]
+    return jobs
+
+
+# ------------------------------------------------------------------ workers
+def _worker_init(jobs: int) -> None:
+    """OpenCV's own thread pool: one thread per worker when the workers share the cores."""
+    if jobs > 1:
+        import cv2
+
+        cv2.setNumThreads(1)
+
+
+@contextmanager
+def worker_pool(jobs: int):
+    """A process pool of ``jobs`` workers. With more than one, every worker (and every notebook
+    kernel started meanwhile) runs one BLAS and OpenCV thread: OpenBLAS's spinning threads had
+    doubled the batch on 2 cores. Spawned, not forked: a forked child inherits OpenCV's thread
+    pool in a broken state and hangs."""
+    saved = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    if jobs > 1:
+        for var in saved:
+            os.environ.setdefault(var, "1")
+    try:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"),
+                                 initializer=_worker_init, initargs=(jobs,)) as pool:
+            yield pool
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
+
+
+def generate_scene(job: tuple) -> str:
+    """Generate (or find cached) one synthetic scene; runs in a worker process."""
+    cache, scene, frames, seed = job
+    return str(ensure_scene(cache, scene, frames, seed))
+
+
+def evaluate_run(job: Job) -> Done | Failure:
+    """Track and score one job (in a worker process): the record and the trajectory text, which
+    is what gets scored (notebook 90 reads the same rounded poses). An exception is returned as
+    a :class:`Failure`."""
+    t = time.perf_counter()
+    run = job.run
+    try:
+        seq = open_sequence(job.path)
+        print(f"[run] {job.sequence:32s} {run.label:42s} started ({len(seq)} frames)", flush=True)
+        masks = run.mask_source(job.kind)
+        r = run_method(run.method, seq, run.overrides, masks=masks)
+        text = format_trajectory(r.trajectory)
+        errors = evaluate(seq.groundtruth, parse_trajectory(text, "estimate"))
+    except Exception as exc:
+        return Failure(job, f"{type(exc).__name__}: {exc}", time.perf_counter() - t)
+    errors.aligned = None  # not needed past this point; keeps the record small
+    record = RunRecord(
+        job.sequence, run.label, run.method, masks, _relative(job.path), len(seq), errors,
+        len(r.failed_frames), r.stats()["ms_per_frame"],
+        {k: float(sum(v)) / len(seq) for k, v in r.stage_ms.items()}, r.extras, r.scores,
+        r.scored_points, f"{job.sequence}/{file_name(run.label)}.txt")
+    return Done(record, text, time.perf_counter() - t)
+
+
+def execute_notebook(job: tuple) -> tuple[str, float, str]:
+    """Execute one notebook with papermill; returns (name, seconds, error or '')."""
+    name, params, out_path = job
+    import papermill as pm
+
+    t = time.perf_counter()
+    print(f"[notebook] {name}: started", flush=True)
+    try:
+        pm.execute_notebook(str(NOTEBOOK_DIR / f"{name}.ipynb"), str(out_path), parameters=params,
+                            cwd=str(ROOT), progress_bar=False, kernel_name="python3")
+        return name, time.perf_counter() - t, ""
+    except Exception as exc:  # reported in the summary; the run fails without touching reports/
+        last = str(exc).strip().splitlines()[-1] if str(exc).strip() else ""
+        return name, time.perf_counter() - t, f"{type(exc).__name__}: {last}"
+
+
+# ------------------------------------------------------------------ paths
+def file_name(label: str) -> str:
+    """A run label (brackets, colons, commas) as a plain file name."""
+    return "".join(c if c.isalnum() or c in "._-" else "_" for c in label).strip("_")
+
+
+def _relative(path) -> str:
+    """A path relative to the repository root where possible (committed reports stay portable)."""
+    return os.path.relpath(Path(path).resolve(), ROOT)
+
+
+def _portable(executed: Path, replacements: dict[str, str]) -> None:
+    """Replace machine paths (the temporary report folder, the cache) in an executed notebook by
+    the paths relative to the repository root that the reader has."""
+    text = executed.read_text(encoding="utf-8")
+    for old, new in replacements.items():
+        text = text.replace(old, new)
+    executed.write_text(text, encoding="utf-8")
+
+
+# ------------------------------------------------------------------ the batch
+def reproduce(opt: Options) -> int:
+    """Run the batch; returns 0, or raises RuntimeError (with reports/ left as it was) when a
+    run or a notebook failed."""
+    profiles, notebooks = load_registry()
+    if opt.profile not in profiles:
+        raise ValueError(f"unknown profile {opt.profile!r}: {REGISTRY} has {', '.join(profiles)}")
+    prof = profiles[opt.profile]
+    frames = opt.frames or prof["frames"]
+    cache = Path(opt.cache)
+    t0 = time.perf_counter()
+    fingerprint = code_fingerprint(ROOT)
+    for d in opt.data:
+        seq = open_sequence(d)  # validate real data before any long work, with a clear error
+        print(f"[data] {d}: {len(seq)} frames", flush=True)
+    with worker_pool(opt.jobs) as pool:
+        scenes = list(prof["scenes"])
+        paths = dict(zip(scenes, pool.map(generate_scene, [(str(cache), s, frames, opt.seed) for s in scenes])))
+        for scene, path in paths.items():
+            print(f"[data] synthetic {scene}: {frames} frames at {path}", flush=True)
+        jobs = plan(paths, opt.data)
+        t_runs = time.perf_counter()
+        print(f"[runs] {len(jobs)} runs on {opt.jobs} worker(s)", flush=True)
+        futures = [pool.submit(evaluate_run, job) for job in jobs]
+        for k, fut in enumerate(as_completed(futures), 1):
+            _progress(k, len(jobs), fut.result())
+        outcomes = [f.result() for f in futures]  # job order: deterministic tables
+    failed = [o for o in outcomes if isinstance(o, Failure)]
+    done = [o for o in outcomes if isinstance(o, Done)]
+    records = [d.record for d in done]
+    t_nb = time.perf_counter()
+    writer = ReportWriter(opt.reports)
+    nb_times, failed_nbs = {}, []
+    command = _command(opt)
+    source = (f"Run: `python -m dynslam_lite reproduce --profile {opt.profile}` (synthetic seed "
+              f"{opt.seed}, {frames} frames" + "".join(f", --data {Path(d).name}" for d in opt.data) + ").")
+    try:
+        tables.write_all(records, writer.tmp, source)
+        for d in done:
+            writer.write_text(f"trajectories/{d.record.trajectory}", d.trajectory)
+        writer.write_text("trajectories/runs.json", experiments.runs_json(records))
+        writer.adopt_all()
+        (writer.tmp / "executed").mkdir(exist_ok=True)
+        out = str(writer.tmp.resolve())
+        nb_jobs = [(name, {**params[opt.profile], "output_dir": out,
+                           **({"runs_dir": str(writer.tmp.resolve() / "trajectories"), "source": source}
+                              if name.startswith("90_") else {"cache_dir": str(cache.resolve())})},
+                    writer.tmp / "executed" / f"{name}.ipynb")
+                   for name, params in notebooks.items() if opt.notebooks]
+        portable = {out: _relative(opt.reports), str(cache.resolve()): _relative(cache)}
+        with ThreadPoolExecutor(max_workers=opt.jobs) as threads:  # kernels are processes
+            for (name, secs, err), (_, _, path) in zip(threads.map(execute_notebook, nb_jobs), nb_jobs):
+                print(f"[notebook] {name}: {'FAILED ' + err if err else 'ok'} ({secs:.0f} s)", flush=True)
+                nb_times[name] = secs
+                if err:
+                    failed_nbs.append((name, err))
+                elif path.exists():
+                    _portable(path, portable)
+        writer.write_text("provenance.json", _provenance(opt, prof, frames, command, fingerprint))
+        writer.write_text("README.md", _index(opt, prof, frames, command))
+        _summary(records, failed, nb_times, failed_nbs, t_nb - t_runs, time.perf_counter() - t0)
+        if failed or failed_nbs:
+            keep = cache.parent / "failed_notebooks"
+            for name, _ in failed_nbs:
+                src = writer.tmp / "executed" / f"{name}.ipynb"
+                if src.exists():
+                    keep.mkdir(parents=True, exist_ok=True)
+                    shutil.copy(src, keep / src.name)
+            raise RuntimeError(f"{len(failed)} run(s) and {len(failed_nbs)} notebook(s) failed; "
+                               f"{opt.reports}/ left as it was"
+                               + (f"; executed copies with the error in {keep}" if failed_nbs else ""))
+        writer.adopt_all()
+        written = writer.commit()
+    except BaseException:
+        writer.abort()
+        raise
+    print(f"[done] wrote {len(written)} files under {opt.reports}/ (index: {opt.reports}/README.md)")
+    return 0
+
+
+def _progress(k: int, n: int, outcome) -> None:
+    if isinstance(outcome, Failure):
+        print(f"[run {k}/{n}] {outcome.job.sequence:32s} {outcome.job.run.label:42s} FAILED {outcome.error}",
+              flush=True)
+        return
+    rec = outcome.record
+    print(f"[run {k}/{n}] {rec.sequence:32s} {rec.label:42s} ATE {rec.errors.ate.rmse:.4f} m "
+          f"RPE {fmt(rec.errors.rpe_trans.rmse)} m/s ({rec.frames} frames, {outcome.seconds:.0f} s)", flush=True)
+
+
+def _command(opt: Options) -> str:
+    return (f"python -m dynslam_lite reproduce --profile {opt.profile}"
+            + (f" --frames {opt.frames}" if opt.frames else "") + (f" --seed {opt.seed}" if opt.seed else "")
+            + "".join(f" --data {_relative(d)}" for d in opt.data))
+
+
+def _provenance(opt: Options, prof: dict, frames: int, command: str, fingerprint: str) -> str:
+    import json
+
+    return json.dumps({
+        "command": command, "profile": opt.profile, "frames": frames, "seed": opt.seed,
+        "scenes": list(prof["scenes"]), "data": [_relative(d) for d in opt.data],
+        "notebooks": opt.notebooks, "code_sha256": fingerprint}, indent=1) + "\n"
+
+
+def _index(opt: Options, prof: dict, frames: int, command: str) -> str:
+    """``reports/README.md`` from its template, with what wrote the folder."""
+    template = Path(__file__).with_name("reports_README.md").read_text(encoding="utf-8")
+    return template.replace(
+        "{{provenance}}",
+        f"This folder was written by `{command}` ({opt.profile} profile: {len(prof['scenes'])} synthetic "
+        f"scenes x {frames} frames, seed {opt.seed}"
+        + (", plus the real clips " + ", ".join(f"`{Path(d).name}`" for d in opt.data) if opt.data else "")
+        + "; which methods run where is set in `dynslam_lite/experiments.py`).")
+
+
+def _summary(records, failed, nb_times, failed_nbs, run_secs, total_secs) -> None:
+    """What ran, how long, what failed: printed at the end of the batch."""
+    seqs = sorted({r.sequence for r in records})
+    print("\n[summary]")
+    print(f"  runs:      {len(records)} ok, {len(failed)} failed, on {len(seqs)} sequences, "
+          f"{run_secs / 60:.1f} min")
+    for f in failed:
+        print(f"    FAILED {f.job.sequence} {f.job.run.label}: {f.error}")
+    for r in records:
+        if r.failed_frames:
+            print(f"    tracking failed on {r.failed_frames} frame(s): {r.sequence} {r.label}")
+    print(f"  notebooks: {len(nb_times) - len(failed_nbs)} ok, {len(failed_nbs)} failed"
+          + "".join(f"; {n} {t:.0f} s" for n, t in nb_times.items()))
+    for name, err in failed_nbs:
+        print(f"    FAILED {name}: {err}")
+    print(f"  total:     {total_secs / 60:.1f} min", flush=True)

@@ -1,0 +1,218 @@
+"""Experiments as data: which method runs on which sequences, with which masks and parameters.
+
+One typed table read by the batch (:mod:`dynslam_lite.batch`), the results tables
+(:mod:`dynslam_lite.tables`), notebook 90 and the tests. A run's label (the 'method' column of
+every table, e.g. ``weightedstatic[oracle:degraded]``) is written here and nowhere else: to add a
+run, add a :class:`Run` and put it in a :class:`RunSet`; to add a method, register it in
+:data:`dynslam_lite.pipeline.METHODS` and add its runs here.
+
+Results travel as :class:`RunRecord` (what ran where and what it measured), saved as
+``trajectories/runs.json`` by the batch and read back by notebook 90.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from .evaluation import ErrorStats, MaskScores, TrajectoryErrors
+
+# The semantic mask source a run takes from its data: the synthetic ground truth split into
+# instances (what a perfect person detector gives), and on real data the bundled person model.
+SEMANTIC = "semantic"
+SEMANTIC_SOURCE = {"synthetic": "oracle", "real": "person"}
+
+
+@dataclass(frozen=True)
+class Run:
+    """One configuration of a method.
+
+    Attributes
+    ----------
+    label : the name in the tables (unique)
+    method : a key of :data:`dynslam_lite.pipeline.METHODS`
+    masks : a mask source spec (:mod:`dynslam_lite.masks`), or :data:`SEMANTIC`
+    params : config overrides, as ``--set key=value`` takes them
+    description : what the configuration is, for the ablation tables
+    """
+
+    label: str
+    method: str
+    masks: str = "none"
+    params: tuple[tuple[str, Any], ...] = ()
+    description: str = ""
+
+    def mask_source(self, kind: str) -> str:
+        """The mask source spec on data of ``kind`` ('synthetic' or 'real')."""
+        return SEMANTIC_SOURCE[kind] if self.masks == SEMANTIC else self.masks
+
+    @property
+    def overrides(self) -> dict[str, Any]:
+        return dict(self.params)
+
+
+def _run(label: str, method: str, masks: str = "none", description: str = "", **params) -> Run:
+    return Run(label, method, masks, tuple(params.items()), description)
+
+
+# ---------------------------------------------------------------- the runs
+STATIC_DENSE = _run("static-dense", "static-dense", description="DVO-like dense baseline (paper A's DVO)")
+OPENCV_ODOMETRY = _run("opencv-odometry", "opencv-odometry", description="cv2.Odometry RGB-D, frame to frame")
+DEPTHCLUSTER = _run("depthcluster", "depthcluster", description="paper A")
+STATIC_ORB = _run("static-orb", "static-orb", description="no masks (static-orb)")
+WEIGHTEDSTATIC = _run("weightedstatic", "weightedstatic", SEMANTIC,
+                      "oracle (synthetic) / person model (real) masks + geometric test + weights")
+BGRESTORE = _run("bgrestore", "bgrestore", SEMANTIC, "paper C with oracle (synthetic) / person model (real) masks")
+
+# paper B's ablation: masks alone, then the geometric test and the weights on degraded masks
+STATIC_ORB_ORACLE = _run("static-orb[oracle]", "static-orb", "oracle", "masks only, oracle")
+STATIC_ORB_DEGRADED = _run("static-orb[oracle:degraded]", "static-orb", "oracle:degraded", "masks only, degraded")
+STATIC_ORB_PERSON = _run("static-orb[person]", "static-orb", "person", "masks only, person model")
+WS_DEGRADED_GEOMETRY = Run("weightedstatic[oracle:degraded,geometry]", "weightedstatic", "oracle:degraded",
+                           (("use_weights", False),), "degraded masks + geometric test")
+WS_DEGRADED_WEIGHTS = Run("weightedstatic[oracle:degraded,weights]", "weightedstatic", "oracle:degraded",
+                          (("use_geometry", False),), "degraded masks + weights")
+WS_DEGRADED = _run("weightedstatic[oracle:degraded]", "weightedstatic", "oracle:degraded",
+                   "degraded masks + geometric test + weights")
+WS_NONE = _run("weightedstatic[none]", "weightedstatic", "none", "no masks, geometric test + weights")
+
+# paper C's choices: removal without restoration, the paper's adjacent frames, no masks
+BG_NO_RESTORE = _run("bgrestore[no-restore]", "bgrestore", "oracle", "removal without restoration", restore=False)
+BG_ADJACENT = Run("bgrestore[adjacent]", "bgrestore", "oracle", (("removal.frame_gap", 1),),
+                  "the paper's adjacent frames for the epipolar vote")
+BG_NONE = _run("bgrestore[none]", "bgrestore", "none", "no masks (removes nothing)")
+
+
+@dataclass(frozen=True)
+class RunSet:
+    """Runs made on a group of sequences: named synthetic scenes (``scenes``; None = every scene
+    of the profile) or every real sequence (``real``)."""
+
+    name: str
+    runs: tuple[Run, ...]
+    scenes: tuple[str, ...] | None = None
+    real: bool = False
+
+    def covers(self, kind: str, scene: str | None) -> bool:
+        if kind == "real":
+            return self.real
+        return not self.real and (self.scenes is None or scene in self.scenes)
+
+
+WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
+RUN_SETS = (
+    RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC)),
+    RunSet("paper B ablation", (STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, WS_DEGRADED_GEOMETRY, WS_DEGRADED_WEIGHTS,
+                                WS_DEGRADED, WS_NONE), scenes=("walking_xyz", "walking_rpy")),
+    RunSet("paper C", (BGRESTORE,), scenes=WALKING),  # paper C's tables cover the walking scenes
+    RunSet("paper C ablation", (BG_NO_RESTORE, BG_ADJACENT), scenes=("walking_xyz",)),
+    # real data: the bundled person model (a stand-in for the papers' networks), and without masks
+    RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
+                         STATIC_ORB_PERSON, WS_NONE, BG_NONE), real=True),
+)
+
+# rows of paper B's ablation table, in order
+PAPER_B_ABLATION = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, STATIC_ORB_PERSON, WS_DEGRADED_GEOMETRY,
+                    WS_DEGRADED_WEIGHTS, WS_DEGRADED, WEIGHTEDSTATIC, WS_NONE)
+# the methods of the summary figure
+MAIN = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DEPTHCLUSTER, WEIGHTEDSTATIC, BGRESTORE)
+# the papers' baselines: DVO (paper A) and ORB-SLAM2 (papers B and C)
+STATIC_BASELINES = (STATIC_DENSE, STATIC_ORB)
+
+
+def runs_for(kind: str, scene: str | None = None) -> list[Run]:
+    """Every run on a sequence of ``kind`` ('synthetic' with its ``scene``, or 'real'), in the
+    order of :data:`RUN_SETS` (each label once)."""
+    out: dict[str, Run] = {}
+    for s in RUN_SETS:
+        if s.covers(kind, scene):
+            for r in s.runs:
+                out.setdefault(r.label, r)
+    return list(out.values())
+
+
+def all_runs() -> dict[str, Run]:
+    """Every run of the registry by label."""
+    return {r.label: r for s in RUN_SETS for r in s.runs}
+
+
+# ---------------------------------------------------------------- results
+@dataclass
+class RunRecord:
+    """One run of the batch: what ran on which sequence, and what it measured.
+
+    Attributes
+    ----------
+    sequence : 'synthetic/<scene>' or 'real/<folder>'
+    label, method, masks : the :class:`Run` (masks resolved for the data)
+    path : the sequence folder (relative to the repository root where possible)
+    frames : frames tracked
+    errors : ATE and 1-s RPE against ground truth
+    failed_frames : frames whose tracking failed
+    ms_per_frame : mean wall-clock time per frame; stages: ms per frame of each stage
+    extras : the method's own statistics; scores: its verdicts against ground truth
+        (:attr:`dynslam_lite.pipeline.RunResult.scores`); scored_points: keypoints scored
+    trajectory : the estimate's file, relative to ``trajectories/``
+    """
+
+    sequence: str
+    label: str
+    method: str
+    masks: str
+    path: str
+    frames: int
+    errors: TrajectoryErrors
+    failed_frames: int = 0
+    ms_per_frame: float = 0.0
+    stages: dict[str, float] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
+    scores: dict[str, MaskScores] = field(default_factory=dict)
+    scored_points: int = 0
+    trajectory: str = ""
+
+    @property
+    def is_real(self) -> bool:
+        return self.sequence.startswith("real/")
+
+    def score(self, key: str) -> MaskScores | None:
+        """Score ``key`` when anything was counted (else None)."""
+        s = self.scores.get(key)
+        return s if s is not None and s.counted else None
+
+    def to_json(self) -> dict[str, Any]:
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d["errors"] = _finite(self.errors.as_dict())
+        d["scores"] = {k: asdict(v) for k, v in self.scores.items()}
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "RunRecord":
+        d = dict(d)
+        e = d["errors"]
+        stats = [ErrorStats(**{k: (math.nan if v is None else v) for k, v in e[key].items()})
+                 for key in ("ate_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s")]
+        d["errors"] = TrajectoryErrors(*stats, e["matched_poses"])
+        d["scores"] = {k: MaskScores(**v) for k, v in d.get("scores", {}).items()}
+        return cls(**d)
+
+
+def _finite(obj):
+    """NaN -> None, so the JSON is valid."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, float) and math.isnan(obj):
+        return None
+    return obj
+
+
+def runs_json(records: list[RunRecord]) -> str:
+    """Text of ``runs.json`` for ``records``."""
+    return json.dumps([r.to_json() for r in records], indent=1) + "\n"
+
+
+def read_runs(runs_dir: str | Path) -> list[RunRecord]:
+    """The records of ``runs_dir/runs.json`` (written by the batch)."""
+    path = Path(runs_dir) / "runs.json"
+    return [RunRecord.from_json(d) for d in json.loads(path.read_text(encoding="utf-8"))]

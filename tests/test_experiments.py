@@ -1,0 +1,148 @@
+"""The experiment registry is the one place of every run, and the package's layering holds: one
+file per run label, no import cycle, papers never import each other."""
+import ast
+import math
+import re
+from pathlib import Path
+
+import pytest
+
+from dynslam_lite import experiments as E
+from dynslam_lite.evaluation import ErrorStats, MaskScores, TrajectoryErrors
+from dynslam_lite.masks import make_mask_source
+from dynslam_lite.pipeline import METHODS, make_config
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPERS = ("depthcluster", "weightedstatic", "bgrestore")
+
+
+def test_every_run_is_valid_and_labelled_once():
+    runs = [r for s in E.RUN_SETS for r in s.runs]
+    by_label = E.all_runs()
+    assert all(by_label[r.label] is r for r in runs)  # one Run object per label
+    for r in runs:
+        cls = METHODS[r.method]
+        make_config(cls.config_type, r.overrides)  # parameters exist
+        for kind in ("synthetic", "real"):
+            spec = r.mask_source(kind)
+            assert spec == "none" or cls.uses_masks, r
+            if not spec.startswith("person"):
+                make_mask_source(spec)
+
+
+def test_runs_per_sequence_follow_the_run_sets():
+    assert [r.label for r in E.runs_for("synthetic", "static_xyz")] == [
+        "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic"]
+    xyz = E.runs_for("synthetic", "walking_xyz")
+    assert len(xyz) == 14 and xyz[-1] is E.BG_ADJACENT and E.BGRESTORE in xyz
+    real = E.runs_for("real")
+    assert E.WEIGHTEDSTATIC.mask_source("real") == "person" and E.WEIGHTEDSTATIC.mask_source("synthetic") == "oracle"
+    assert E.BG_NO_RESTORE not in real and E.STATIC_ORB_PERSON in real
+
+
+def _files():
+    for folder in ("dynslam_lite", "notebooks", "tests"):
+        for p in (ROOT / folder).rglob("*"):
+            if p.suffix in (".py", ".ipynb", ".md", ".yaml") and "__pycache__" not in p.parts:
+                yield p
+
+
+def test_no_run_label_is_written_outside_the_registry():
+    """A label that is not simply its method's name (brackets: mask source, variant) appears in
+    experiments.py only: tables, notebooks and tests refer to the Run objects."""
+    labels = [label for label, r in E.all_runs().items() if label != r.method]
+    assert len(labels) >= 10
+    texts = {p: p.read_text(encoding="utf-8") for p in _files()}
+    for label in labels:
+        where = sorted(str(p.relative_to(ROOT)) for p, t in texts.items() if label in t)
+        assert where == ["dynslam_lite/experiments.py"], (label, where)
+
+
+def _imports(path: Path, package: str) -> set[str]:
+    """Package modules imported by ``path`` (any depth, relative imports resolved)."""
+    mod = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+    base = mod.split(".") if path.name == "__init__.py" else mod.split(".")[:-1]
+    if path.name == "__init__.py":
+        base = base[:-1] if base[-1] == "__init__" else base
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = base[: len(base) - node.level + 1] + (node.module.split(".") if node.module else [])
+            else:
+                parts = (node.module or "").split(".")
+            if parts[0] == package:
+                name = ".".join(parts)
+                out.add(name)
+                out.update(f"{name}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names if a.name.split(".")[0] == package)
+    return out
+
+
+def _graph():
+    modules = {}
+    for p in (ROOT / "dynslam_lite").rglob("*.py"):
+        parts = p.relative_to(ROOT).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        modules[name] = p
+    graph = {}
+    for name, p in modules.items():
+        deps = {d for d in _imports(p, "dynslam_lite") if d in modules and d != name}
+        graph[name] = deps
+    return graph
+
+
+def test_no_import_cycle_and_papers_never_import_each_other():
+    graph = _graph()
+    state: dict[str, int] = {}
+
+    def visit(n, path):
+        state[n] = 1
+        for d in graph[n]:
+            if state.get(d) == 1:
+                pytest.fail("import cycle: " + " -> ".join(path + [n, d]))
+            if d not in state:
+                visit(d, path + [n])
+        state[n] = 2
+
+    for n in graph:
+        if n not in state:
+            visit(n, [])
+    for paper in PAPERS:
+        for n, deps in graph.items():
+            if n.startswith(f"dynslam_lite.{paper}"):
+                others = {d for d in deps if any(d.startswith(f"dynslam_lite.{o}") for o in PAPERS if o != paper)}
+                assert not others, (n, others)
+    assert not graph["dynslam_lite.geometry"] - {"dynslam_lite.checks"}  # pure maths
+
+
+def test_run_record_round_trips_through_json_with_undefined_numbers_as_null():
+    nan = math.nan
+    errors = TrajectoryErrors(ErrorStats(0.1, 0.09, 0.08, 0.02, 0.01, 0.3, 12),
+                              ErrorStats(nan, nan, nan, nan, nan, nan, 0),
+                              ErrorStats(nan, nan, nan, nan, nan, nan, 0), 12)
+    rec = E.RunRecord("synthetic/walking_xyz", E.WS_DEGRADED.label, "weightedstatic", "oracle:degraded",
+                      "build/data/x", 12, errors, 1, 50.0, {"orb": 7.0}, {"keyframes": 3},
+                      {"points/geometric": MaskScores.from_counts(5, 2, 1)}, 40, "synthetic/walking_xyz/x.txt")
+    text = E.runs_json([rec])
+    assert "NaN" not in text and "null" in text
+    import json
+
+    back = E.RunRecord.from_json(json.loads(text)[0])
+    assert back.errors.ate == rec.errors.ate and math.isnan(back.errors.rpe_trans.rmse)
+    assert back.scores == rec.scores and back.label == rec.label and back.score("points/geometric").tp == 5
+
+
+def test_notebooks_set_up_in_one_call_and_define_no_package_helper():
+    import json
+
+    from dynslam_lite import notebook
+
+    helpers = {n for n in dir(notebook) if not n.startswith("_")} | {"psnr", "gt_pose", "gt_T_w_c", "at"}
+    for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        code = "\n".join("".join(c["source"]) for c in json.loads(nb.read_text())["cells"] if c["cell_type"] == "code")
+        assert len(re.findall(r"nb\.setup\(", code)) == 1, nb.name
+        defined = set(re.findall(r"^\s*def (\w+)\(", code, re.M))
+        assert not defined & helpers, (nb.name, defined & helpers)
+        assert "os.chdir" not in code and "sys.path" not in code, nb.name
