@@ -13,6 +13,8 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import shutil
+import signal
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -20,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import experiments, tables
+from .errors import BatchError, ConfigError, Interrupted
 from .evaluation import evaluate
 from .experiments import Run, RunRecord
 from .io import format_trajectory, open_sequence, parse_trajectory
@@ -86,14 +89,14 @@ def load_registry(path: Path = REGISTRY) -> tuple[dict, dict]:
         reg = yaml.safe_load(path.read_text(encoding="utf-8"))
         profiles, notebooks = reg["profiles"], reg["notebooks"]
     except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
-        raise ValueError(f"{path}: not a readable reproduction registry ({exc})") from exc
+        raise ConfigError(f"{path}: not a readable reproduction registry ({exc})") from exc
     for prof in profiles.values():
         prof["scenes"] = tuple(SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
     for name, params in notebooks.items():
         if not (NOTEBOOK_DIR / f"{name}.ipynb").exists():
-            raise ValueError(f"{path}: notebook {name}.ipynb does not exist")
+            raise ConfigError(f"{path}: notebook {name}.ipynb does not exist")
         if set(params) != set(profiles):
-            raise ValueError(f"{path}: notebook {name} needs parameters for every profile {sorted(profiles)}")
+            raise ConfigError(f"{path}: notebook {name} needs parameters for every profile {sorted(profiles)}")
     return profiles, notebooks
 
 
@@ -106,12 +109,39 @@ def plan(scene_paths: dict[str, str], data: list[str]) -> list[Job]:
 
 
 # ------------------------------------------------------------------ workers
+def _say(line: str) -> None:
+    """One line of progress, written whole (worker and main-process lines never run together)."""
+    sys.stdout.write(line + "\n")
+    sys.stdout.flush()
+
+
 def _worker_init(jobs: int) -> None:
-    """OpenCV's own thread pool: one thread per worker when the workers share the cores."""
+    """Workers leave Ctrl-C to the main process, which stops them (:func:`stop_children`);
+    OpenCV's own thread pool: one thread per worker when the workers share the cores."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if jobs > 1:
         import cv2
 
         cv2.setNumThreads(1)
+
+
+def stop_children(grace_s: float = 3.0) -> None:
+    """End every process this one started (workers, notebook kernels): SIGTERM, then SIGKILL
+    for those still alive after ``grace_s`` seconds."""
+    import psutil
+
+    children = psutil.Process().children(recursive=True)
+    for c in children:
+        try:
+            c.terminate()
+        except psutil.NoSuchProcess:
+            pass
+    _, alive = psutil.wait_procs(children, timeout=grace_s)
+    for c in alive:
+        try:
+            c.kill()
+        except psutil.NoSuchProcess:
+            pass
 
 
 @contextmanager
@@ -119,15 +149,22 @@ def worker_pool(jobs: int):
     """A process pool of ``jobs`` workers. With more than one, every worker (and every notebook
     kernel started meanwhile) runs one BLAS and OpenCV thread: OpenBLAS's spinning threads had
     doubled the batch on 2 cores. Spawned, not forked: a forked child inherits OpenCV's thread
-    pool in a broken state and hangs."""
+    pool in a broken state and hangs. Left by an exception (Ctrl-C), the workers are stopped at
+    once instead of finishing the queue."""
     saved = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
     if jobs > 1:
         for var in saved:
             os.environ.setdefault(var, "1")
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"),
+                               initializer=_worker_init, initargs=(jobs,))
     try:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"),
-                                 initializer=_worker_init, initargs=(jobs,)) as pool:
-            yield pool
+        yield pool
+    except BaseException:
+        stop_children()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    else:
+        pool.shutdown(wait=True)
     finally:
         for var, value in saved.items():
             if value is None:
@@ -150,7 +187,7 @@ def evaluate_run(job: Job) -> Done | Failure:
     run = job.run
     try:
         seq = open_sequence(job.path)
-        print(f"[run] {job.sequence:32s} {run.label:42s} started ({len(seq)} frames)", flush=True)
+        _say(f"[run] {job.sequence:32s} {run.label:42s} started ({len(seq)} frames)")
         masks = run.mask_source(job.kind)
         r = run_method(run.method, seq, run.overrides, masks=masks)
         text = format_trajectory(r.trajectory)
@@ -172,7 +209,7 @@ def execute_notebook(job: tuple) -> tuple[str, float, str]:
     import papermill as pm
 
     t = time.perf_counter()
-    print(f"[notebook] {name}: started", flush=True)
+    _say(f"[notebook] {name}: started")
     try:
         pm.execute_notebook(str(NOTEBOOK_DIR / f"{name}.ipynb"), str(out_path), parameters=params,
                             cwd=str(ROOT), progress_bar=False, kernel_name="python3")
@@ -204,11 +241,20 @@ def _portable(executed: Path, replacements: dict[str, str]) -> None:
 
 # ------------------------------------------------------------------ the batch
 def reproduce(opt: Options) -> int:
-    """Run the batch; returns 0, or raises RuntimeError (with reports/ left as it was) when a
-    run or a notebook failed."""
+    """Run the batch; returns 0, or raises BatchError (with reports/ left as it was) when a run
+    or a notebook failed, Interrupted on Ctrl-C / SIGTERM (workers and kernels stopped, reports/
+    left as it was)."""
+    try:
+        return _reproduce(opt)
+    except KeyboardInterrupt:
+        raise Interrupted(f"reproduce stopped, its workers and notebook kernels ended; {opt.reports}/ "
+                          "left as it was") from None
+
+
+def _reproduce(opt: Options) -> int:
     profiles, notebooks = load_registry()
     if opt.profile not in profiles:
-        raise ValueError(f"unknown profile {opt.profile!r}: {REGISTRY} has {', '.join(profiles)}")
+        raise ConfigError(f"unknown profile {opt.profile!r}: {REGISTRY} has {', '.join(profiles)}")
     prof = profiles[opt.profile]
     frames = opt.frames or prof["frames"]
     cache = Path(opt.cache)
@@ -216,15 +262,15 @@ def reproduce(opt: Options) -> int:
     fingerprint = code_fingerprint(ROOT)
     for d in opt.data:
         seq = open_sequence(d)  # validate real data before any long work, with a clear error
-        print(f"[data] {d}: {len(seq)} frames", flush=True)
+        _say(f"[data] {d}: {len(seq)} frames")
     with worker_pool(opt.jobs) as pool:
         scenes = list(prof["scenes"])
         paths = dict(zip(scenes, pool.map(generate_scene, [(str(cache), s, frames, opt.seed) for s in scenes])))
         for scene, path in paths.items():
-            print(f"[data] synthetic {scene}: {frames} frames at {path}", flush=True)
+            _say(f"[data] synthetic {scene}: {frames} frames at {path}")
         jobs = plan(paths, opt.data)
         t_runs = time.perf_counter()
-        print(f"[runs] {len(jobs)} runs on {opt.jobs} worker(s)", flush=True)
+        _say(f"[runs] {len(jobs)} runs on {opt.jobs} worker(s)")
         futures = [pool.submit(evaluate_run, job) for job in jobs]
         for k, fut in enumerate(as_completed(futures), 1):
             _progress(k, len(jobs), fut.result())
@@ -251,15 +297,18 @@ def reproduce(opt: Options) -> int:
                               if name.startswith("90_") else {"cache_dir": str(cache.resolve())})},
                     writer.tmp / "executed" / f"{name}.ipynb")
                    for name, params in notebooks.items() if opt.notebooks]
-        portable = {out: _relative(opt.reports), str(cache.resolve()): _relative(cache)}
-        with ThreadPoolExecutor(max_workers=opt.jobs) as threads:  # kernels are processes
+        portable = {out: _relative(opt.reports), str(cache.resolve()): _relative(cache), f"{ROOT}{os.sep}": ""}
+        threads = ThreadPoolExecutor(max_workers=opt.jobs)  # kernels are processes
+        try:
             for (name, secs, err), (_, _, path) in zip(threads.map(execute_notebook, nb_jobs), nb_jobs):
-                print(f"[notebook] {name}: {'FAILED ' + err if err else 'ok'} ({secs:.0f} s)", flush=True)
+                _say(f"[notebook] {name}: {'FAILED ' + err if err else 'ok'} ({secs:.0f} s)")
                 nb_times[name] = secs
                 if err:
                     failed_nbs.append((name, err))
                 elif path.exists():
                     _portable(path, portable)
+        finally:  # on Ctrl-C: kernels stopped, threads not waited for
+            threads.shutdown(wait=False, cancel_futures=True)
         writer.write_text("provenance.json", _provenance(opt, prof, frames, command, fingerprint))
         writer.write_text("README.md", _index(opt, prof, frames, command))
         _summary(records, failed, nb_times, failed_nbs, t_nb - t_runs, time.perf_counter() - t0)
@@ -270,7 +319,7 @@ def reproduce(opt: Options) -> int:
                 if src.exists():
                     keep.mkdir(parents=True, exist_ok=True)
                     shutil.copy(src, keep / src.name)
-            raise RuntimeError(f"{len(failed)} run(s) and {len(failed_nbs)} notebook(s) failed; "
+            raise BatchError(f"{len(failed)} run(s) and {len(failed_nbs)} notebook(s) failed; "
                                f"{opt.reports}/ left as it was"
                                + (f"; executed copies with the error in {keep}" if failed_nbs else ""))
         writer.adopt_all()
@@ -278,18 +327,17 @@ def reproduce(opt: Options) -> int:
     except BaseException:
         writer.abort()
         raise
-    print(f"[done] wrote {len(written)} files under {opt.reports}/ (index: {opt.reports}/README.md)")
+    _say(f"[done] wrote {len(written)} files under {opt.reports}/ (index: {opt.reports}/README.md)")
     return 0
 
 
 def _progress(k: int, n: int, outcome) -> None:
     if isinstance(outcome, Failure):
-        print(f"[run {k}/{n}] {outcome.job.sequence:32s} {outcome.job.run.label:42s} FAILED {outcome.error}",
-              flush=True)
+        _say(f"[run {k}/{n}] {outcome.job.sequence:32s} {outcome.job.run.label:42s} FAILED {outcome.error}")
         return
     rec = outcome.record
-    print(f"[run {k}/{n}] {rec.sequence:32s} {rec.label:42s} ATE {rec.errors.ate.rmse:.4f} m "
-          f"RPE {fmt(rec.errors.rpe_trans.rmse)} m/s ({rec.frames} frames, {outcome.seconds:.0f} s)", flush=True)
+    _say(f"[run {k}/{n}] {rec.sequence:32s} {rec.label:42s} ATE {rec.errors.ate.rmse:.4f} m "
+         f"RPE {fmt(rec.errors.rpe_trans.rmse)} m/s ({rec.frames} frames, {outcome.seconds:.0f} s)")
 
 
 def _command(opt: Options) -> str:

@@ -3,26 +3,34 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import sys
+import threading
 import time
+import traceback
 from pathlib import Path
 
 from . import batch, experiments
-from .download import ARCHIVES, DownloadError, download
+from .download import ARCHIVES, download
+from .errors import ConfigError, Interrupted, SequenceError, UserError
 from .evaluation import evaluate
-from .io import SequenceError, atomic_write_text, open_sequence, read_groundtruth, read_trajectory, write_trajectory
+from .io import atomic_write_text, open_sequence, read_groundtruth, read_trajectory, write_trajectory
 from .masks import SOURCES
 from .pipeline import METHODS, parse_value, run_method
 from .synth import SCENES, generate
 
 # bench: the methods of the papers' tables and their baselines
 BENCHED = tuple(dict.fromkeys(r.method for r in experiments.MAIN))
+# a run whose tracking failed on more than this share of frames exits with an error (1)
+MAX_FAILED_SHARE = 0.5
+
 
 def _parse_sets(items: list[str]) -> dict:
     out = {}
     for item in items or []:
         if "=" not in item:
-            raise ValueError(f"--set expects key=value, got {item!r}")
+            raise ConfigError(f"--set expects key=value, got {item!r}")
         k, v = item.split("=", 1)
         out[k.strip()] = parse_value(v.strip())
     return out
@@ -46,12 +54,21 @@ def cmd_run(a) -> int:
         print(f"tracking failed on frame {i}: {reason}", file=sys.stderr)
     print(f"{a.method}: {stats['frames']} frames, {len(result.failed_frames)} failed, "
           f"{stats['ms_per_frame']:.1f} ms/frame, peak {stats['peak_mem_mib']:.0f} MiB -> {a.out}")
+    n_failed, n = len(result.failed_frames), len(result.frames) - 1
+    if n_failed > MAX_FAILED_SHARE * n:
+        print(f"error: tracking failed on {n_failed} of {n} frame pairs of {seq.root}: {a.out} is mostly "
+              "constant-velocity guesses, not a result", file=sys.stderr)
+        return 1
     return 0
 
 
 def cmd_evaluate(a) -> int:
-    gt = read_groundtruth(a.gt, a.bonn)
-    errors = evaluate(gt, read_trajectory(a.est))
+    gt, est = read_groundtruth(a.gt, a.bonn), read_trajectory(a.est)
+    try:
+        errors = evaluate(gt, est)
+    except ValueError as exc:  # no overlap in time, too few poses
+        span = (lambda t: f"{t.timestamps[0]:.3f}-{t.timestamps[-1]:.3f} s, {len(t)} poses")
+        raise SequenceError(f"{a.est} ({span(est)}) against {a.gt} ({span(gt)}): {exc}") from None
     if a.json:
         print(json.dumps(errors.as_dict()))
     else:
@@ -189,10 +206,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _stop_on_sigterm(signum, frame):
+    raise KeyboardInterrupt  # SIGTERM stops a command as Ctrl-C does
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run a command. Exit codes: 0 done, 1 a run whose tracking mostly failed, 2 bad input or a
+    failed step (one line: the file or key and the problem), 3 an internal error (a bug),
+    130 interrupted (Ctrl-C or SIGTERM; nothing half-written)."""
     args = build_parser().parse_args(argv)
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm) if in_main else None
     try:
         return args.func(args)
-    except (SequenceError, DownloadError, ValueError, FileNotFoundError, FileExistsError, RuntimeError) as exc:
+    except (KeyboardInterrupt, Interrupted) as exc:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C cannot break the clean-up
+        batch.stop_children()
+        what = str(exc) or f"{args.command} interrupted; nothing was written"
+        print(f"\ninterrupted: {what}", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(130)  # worker threads blocked on killed processes must not delay the exit
+    except (UserError, FileNotFoundError, FileExistsError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # anything else is a bug: say so, and where
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        print(f"internal error (a bug in dynslam_lite, please report it): {type(exc).__name__}: {exc}\n"
+              f"  at {where.filename}:{where.lineno} in {where.name}; set DYNSLAM_DEBUG=1 for the "
+              "whole traceback", file=sys.stderr)
+        if os.environ.get("DYNSLAM_DEBUG"):
+            traceback.print_exc()
+        return 3
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)

@@ -20,6 +20,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from .errors import UserError
+
 TUM = "https://cvg.cit.tum.de/rgbd/dataset"
 BONN = "https://www.ipb.uni-bonn.de/html/projects/rgbd_dynamic2019"
 
@@ -52,7 +54,7 @@ ARCHIVES: dict[str, Archive] = {
 }
 
 
-class DownloadError(RuntimeError):
+class DownloadError(UserError):
     """A transfer or verification failed; the message says what to do."""
 
 

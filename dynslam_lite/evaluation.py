@@ -57,8 +57,12 @@ class TrajectoryErrors:
     aligned: Trajectory | None = None
 
     def as_dict(self) -> dict:
-        return {"ate_m": asdict(self.ate), "rpe_trans_m_per_s": asdict(self.rpe_trans),
-                "rpe_rot_deg_per_s": asdict(self.rpe_rot_deg), "matched_poses": self.matched_poses}
+        """JSON-ready: undefined statistics (no RPE pair in a clip under 1 s) are None."""
+        def stats(s: ErrorStats) -> dict:
+            return {k: (None if isinstance(v, float) and np.isnan(v) else v) for k, v in asdict(s).items()}
+
+        return {"ate_m": stats(self.ate), "rpe_trans_m_per_s": stats(self.rpe_trans),
+                "rpe_rot_deg_per_s": stats(self.rpe_rot_deg), "matched_poses": self.matched_poses}
 
 
 def to_evo(traj: Trajectory) -> PoseTrajectory3D:

@@ -183,7 +183,7 @@ class RunRecord:
 
     def to_json(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
-        d["errors"] = _finite(self.errors.as_dict())
+        d["errors"] = self.errors.as_dict()
         d["scores"] = {k: asdict(v) for k, v in self.scores.items()}
         return d
 
@@ -196,15 +196,6 @@ class RunRecord:
         d["errors"] = TrajectoryErrors(*stats, e["matched_poses"])
         d["scores"] = {k: MaskScores(**v) for k, v in d.get("scores", {}).items()}
         return cls(**d)
-
-
-def _finite(obj):
-    """NaN -> None, so the JSON is valid."""
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, float) and math.isnan(obj):
-        return None
-    return obj
 
 
 def runs_json(records: list[RunRecord]) -> str:

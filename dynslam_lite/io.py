@@ -18,6 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .errors import SequenceError
 from .geometry import PinholeCamera
 
 # Intrinsics of the public datasets (pinhole, no undistortion), see ../shared/data/README.md.
@@ -38,10 +39,6 @@ BONN_T_M_RAW = np.array(
         [0, 0, 0, 1],
     ]
 )
-
-
-class SequenceError(ValueError):
-    """Bad input: the message names the file and what is wrong."""
 
 
 def bonn_marker_to_camera() -> np.ndarray:

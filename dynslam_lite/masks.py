@@ -25,6 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .errors import ConfigError
 from .imageops import disk, split_instances
 from .io import Frame, SequenceError
 
@@ -141,4 +142,4 @@ def make_mask_source(spec: str):
     if kind == "onnx" and arg:
         from .segmentation import YoloSegMasks
         return YoloSegMasks(arg)
-    raise ValueError(f"unknown mask source {spec!r}: use {SOURCES}")
+    raise ConfigError(f"unknown mask source {spec!r}: use {SOURCES}")

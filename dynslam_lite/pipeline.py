@@ -9,14 +9,17 @@ masks where the sequence has them, and returns every frame's outputs in :class:`
 from __future__ import annotations
 
 import dataclasses
+import math
 import resource
 import time
+import typing
 from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any, Callable, Collection
 
 import numpy as np
 
+from .errors import ConfigError, SequenceError
 from .evaluation import MaskScores, confusion
 from .geometry import invert, sample_nearest
 from .timing import StageTimer
@@ -183,7 +186,8 @@ METHODS: dict[str, type[Method]] = {
 
 
 def parse_value(text: str) -> Any:
-    """A ``--set key=value`` value: int, float, bool, tuple (comma-separated) or string."""
+    """A ``--set key=value`` value: int, float, bool, tuple (comma-separated) or string; the
+    config field's type decides what is accepted (:func:`make_config`)."""
     if "," in text:
         return tuple(parse_value(t) for t in text.split(",") if t)
     low = text.lower()
@@ -197,8 +201,50 @@ def parse_value(text: str) -> Any:
     return text
 
 
+# parameters that count or size something: at least 1; fractions and ratios: at most 1
+_AT_LEAST_ONE = {"levels", "n_features", "n_levels", "grid_cols", "grid_rows", "rows", "cols", "keyframes",
+                 "frame_gap", "reference_keyframes", "local_map_keyframes", "ba_window", "lm_iterations",
+                 "keyframe_max_gap", "max_clusters", "scale_factor", "region_td"}
+
+
+def _coerce(key: str, value: Any, hint, default: Any) -> Any:
+    """``value`` as the type of the config field ``key`` (``hint``), range-checked, or ConfigError."""
+    name = key.rsplit(".", 1)[-1]
+    kind = getattr(hint, "__name__", str(hint))
+
+    def bad(expected: str) -> ConfigError:
+        return ConfigError(f"--set {key}={value!r}: expected {expected} (default {default!r})")
+
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise bad("true or false")
+        return value
+    if hint in (int, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad(f"a number ({kind})")
+        if hint is int and value != int(value):
+            raise bad("an integer")
+        value = hint(value)
+        if not math.isfinite(value) or value < 0:
+            raise bad(f"a finite non-negative {kind}")
+        if name in _AT_LEAST_ONE and value < 1:
+            raise bad(f"a {kind} of at least 1")
+        if ("fraction" in name or "ratio" in name) and value > 1:
+            raise bad(f"a {kind} between 0 and 1")
+        return value
+    if typing.get_origin(hint) is tuple:
+        items = value if isinstance(value, tuple) else (value,)
+        if not items or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in items):
+            raise bad("positive integers separated by commas")
+        return tuple(items)
+    if hint is str:
+        return str(value)
+    raise bad(kind)
+
+
 def make_config(config_type, overrides: dict[str, Any] | None):
-    """Build a config dataclass, rejecting unknown keys with the list of known ones.
+    """Build a config dataclass from ``overrides`` (``--set`` values), each checked against the
+    field's type and range; unknown keys are rejected with the list of known ones.
 
     Nested configs are reached with dotted keys, e.g. ``dense.lambda_depth=0.5``.
     """
@@ -208,16 +254,27 @@ def make_config(config_type, overrides: dict[str, Any] | None):
         for i, part in enumerate(parts):
             known = {f.name for f in dataclasses.fields(obj)}
             if part not in known:
-                raise ValueError(
+                raise ConfigError(
                     f"unknown parameter {key!r} for {config_type.__name__}; known at "
                     f"{'.'.join(parts[:i]) or 'top level'}: {', '.join(sorted(known))}"
                 )
             if i < len(parts) - 1:
                 obj = getattr(obj, part)
                 if not dataclasses.is_dataclass(obj):
-                    raise ValueError(f"{'.'.join(parts[:i + 1])} is not a group of parameters")
-        setattr(obj, parts[-1], value)
+                    raise ConfigError(f"{'.'.join(parts[:i + 1])} is not a group of parameters")
+        hint = typing.get_type_hints(type(obj))[parts[-1]]
+        default = getattr(obj, parts[-1])
+        if dataclasses.is_dataclass(hint):
+            fields = ", ".join(f"{key}.{f.name}" for f in dataclasses.fields(hint))
+            raise ConfigError(f"--set {key}={value!r}: {key} is a group of parameters; set one of {fields}")
+        setattr(obj, parts[-1], _coerce(key, value, hint, default))
     return config
+
+
+# a sequence whose depth has fewer valid pixels than this over its first frames (or the whole
+# run) cannot be tracked by any method here: stopped with an error instead of a trajectory of guesses
+MIN_VALID_DEPTH = 0.01
+DEPTH_CHECK_FRAMES = 10
 
 
 def run_method(
@@ -243,15 +300,15 @@ def run_method(
         kept in ``RunResult.frames``
     """
     if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}: choose one of {', '.join(sorted(METHODS))}")
-    if len(seq) == 0:
-        raise ValueError(f"{seq.root}: empty sequence, nothing to track")
+        raise ConfigError(f"unknown method {method!r}: choose one of {', '.join(sorted(METHODS))}")
+    if len(seq) < 2:
+        raise SequenceError(f"{seq.root}: {len(seq)} frame(s): tracking needs at least 2")
     cls = METHODS[method]
     config = make_config(cls.config_type, params)
     if cls.uses_masks:
         tracker = cls(seq.camera, config, make_mask_source(masks))
     elif masks != "none":
-        raise ValueError(f"method {method!r} does not use semantic masks (got --masks {masks})")
+        raise ConfigError(f"method {method!r} does not use semantic masks (got --masks {masks})")
     else:
         tracker = cls(seq.camera, config)
     keep = set(keep or ())
@@ -265,11 +322,16 @@ def run_method(
 
         iterator = tqdm(iterator, desc=f"{method} {seq.name}", unit="frame")
     ref = None
+    valid_depth = 0.0  # sum over frames of the valid-depth fraction
     for i in iterator:
         timer = StageTimer()
         t0 = time.perf_counter()
         with timer.stage("load"):
             cur = seq[i]
+        valid_depth += np.count_nonzero(cur.depth) / cur.depth.size
+        if i + 1 in (min(DEPTH_CHECK_FRAMES, len(seq)), len(seq)) and valid_depth / (i + 1) < MIN_VALID_DEPTH:
+            raise SequenceError(f"{seq.depth_files[i].parent}: {100 * valid_depth / (i + 1):.2f} % of the depth "
+                                f"pixels of frames 0-{i} are valid (need {100 * MIN_VALID_DEPTH:g} %): no usable depth")
         out = FrameOutput(i, float(seq.timestamps[i]))
         if ref is not None:
             tr = tracker.track(ref, cur, velocity, timer)

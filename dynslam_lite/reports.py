@@ -9,6 +9,7 @@ import json
 import math
 import os
 import shutil
+import signal
 import tempfile
 from pathlib import Path
 from typing import Sequence
@@ -124,12 +125,19 @@ class ReportWriter:
                 self.files.append(rel)
 
     def commit(self) -> list[Path]:
+        """Move every file into place; Ctrl-C and SIGTERM wait until all are moved (a second
+        or so), so reports/ never holds half of a run."""
         out = []
-        for rel in self.files:
-            dest = self.root / rel
-            dest.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(self.tmp / rel, dest)
-            out.append(dest)
+        blocked = {signal.SIGINT, signal.SIGTERM}
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, blocked)
+        try:
+            for rel in self.files:
+                dest = self.root / rel
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(self.tmp / rel, dest)
+                out.append(dest)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
         shutil.rmtree(self.tmp, ignore_errors=True)
         return out
 

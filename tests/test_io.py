@@ -66,6 +66,10 @@ def test_reads_valid_sequence_lazily(tmp_path):
     (lambda r: (r / "depth.txt").write_text("# none\n"), "the sequence has no depth"),
     (lambda r: (r / "depth.txt").write_text("99.0 depth/x.png\n"), "no colour image has a depth image"),
     (lambda r: (r / "camera.txt").unlink(), "unknown camera"),
+    (lambda r: (r / "rgb.txt").write_text("10.0 rgb/a.png\nnan rgb/b.png\n"), "rgb.txt:2: timestamp 'nan' is not a finite"),
+    (lambda r: (r / "rgb.txt").write_text("10.0 rgb/a.png\n10.0 rgb/b.png\n"), "rgb.txt:2: timestamp 10.000000 repeated"),
+    (lambda r: (r / "rgb.txt").write_bytes((r / "rgb.txt").read_text().encode("utf-16")), "rgb.txt: not a UTF-8 text file \\(UTF-16"),
+    (lambda r: sorted((r / "depth").iterdir())[1].unlink(), "depth.txt: 1 listed image\\(s\\) missing, first .*depth/"),
 ])
 def test_bad_input_is_named(tmp_path, breakage, message):
     root = _write_sequence(tmp_path / "seq")

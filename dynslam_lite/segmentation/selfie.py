@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from ..io import Frame
+from ..errors import ConfigError, SequenceError
 from ..imageops import split_instances
 
 MODEL_DIR = Path(__file__).resolve().parent / "models"
@@ -39,7 +40,7 @@ def load_checked(path: Path, sha256: str) -> bytes:
         raise FileNotFoundError(f"{path}: model file missing (reinstall the package)")
     data = path.read_bytes()
     if hashlib.sha256(data).hexdigest() != sha256:
-        raise ValueError(f"{path}: sha256 mismatch, the model file is damaged or replaced")
+        raise SequenceError(f"{path}: sha256 mismatch, the model file is damaged or replaced")
     return data
 
 
@@ -48,7 +49,7 @@ class SelfieSegmenter:
 
     def __init__(self, variant: str = "square"):
         if variant not in MODELS:
-            raise ValueError(f"unknown selfie model {variant!r}: use {', '.join(MODELS)}")
+            raise ConfigError(f"unknown selfie model {variant!r}: use {', '.join(MODELS)}")
         name, self.size, sha = MODELS[variant]
         path = MODEL_DIR / name
         load_checked(path, sha)

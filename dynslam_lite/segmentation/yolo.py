@@ -26,6 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..errors import SequenceError
 from ..io import Frame
 
 
@@ -120,7 +121,7 @@ class YoloSegMasks:
         try:
             self.net = cv2.dnn.readNetFromONNX(str(path))
         except cv2.error as exc:
-            raise ValueError(f"{path}: OpenCV cannot read this ONNX model: {exc}") from None
+            raise SequenceError(f"{path}: OpenCV cannot read this ONNX model: {exc}") from None
         self.name = f"onnx:{path}"
         self.conf, self.iou, self.class_id, self.size = conf, iou, class_id, size
 

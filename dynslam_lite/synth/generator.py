@@ -25,6 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..errors import ConfigError
 from ..geometry import PinholeCamera
 from ..io import Trajectory, format_trajectory
 from .raycast import pixel_rays, render
@@ -111,9 +112,9 @@ def generate(
         and depth (``background_depth/``, same names), for inpainting scores
     """
     if scene not in SCENES:
-        raise ValueError(f"unknown synthetic scene {scene!r}: choose one of {', '.join(SCENES)}")
+        raise ConfigError(f"unknown synthetic scene {scene!r}: choose one of {', '.join(SCENES)}")
     if frames <= 0:
-        raise ValueError(f"frames must be positive, got {frames}")
+        raise ConfigError(f"frames must be positive, got {frames}")
     out_dir = Path(out_dir)
     if out_dir.exists() and any(out_dir.iterdir()) and not (out_dir / "scene.json").is_file():
         raise FileExistsError(f"{out_dir}: exists and is not a synthetic sequence; not overwriting")
