@@ -10,6 +10,8 @@
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import multiprocessing as mp
 import os
 import shutil
@@ -25,10 +27,10 @@ from . import experiments, tables
 from .errors import BatchError, ConfigError, Interrupted
 from .evaluation import evaluate
 from .experiments import Run, RunRecord
-from .io import format_trajectory, open_sequence, parse_trajectory
+from .io import atomic_write_text, format_trajectory, open_sequence, parse_trajectory
 from .pipeline import run_method
 from .reports import ReportWriter, code_fingerprint, fmt
-from .synth import SCENES, ensure_scene
+from .synth import TUM_SCENES, ensure_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOK_DIR = ROOT / "notebooks"
@@ -48,6 +50,7 @@ class Options:
     cache: str = str(DEFAULT_CACHE)
     reports: str = "reports"
     notebooks: bool = True
+    fresh: bool = False  # run everything again instead of taking finished runs from the run cache
 
 
 @dataclass(frozen=True)
@@ -91,7 +94,7 @@ def load_registry(path: Path = REGISTRY) -> tuple[dict, dict]:
     except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
         raise ConfigError(f"{path}: not a readable reproduction registry ({exc})") from exc
     for prof in profiles.values():
-        prof["scenes"] = tuple(SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
+        prof["scenes"] = tuple(TUM_SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
     for name, params in notebooks.items():
         if not (NOTEBOOK_DIR / f"{name}.ipynb").exists():
             raise ConfigError(f"{path}: notebook {name}.ipynb does not exist")
@@ -219,6 +222,56 @@ def execute_notebook(job: tuple) -> tuple[str, float, str]:
         return name, time.perf_counter() - t, f"{type(exc).__name__}: {last}"
 
 
+# ------------------------------------------------------------------ run cache
+class RunCache:
+    """Finished runs by key (:meth:`key`): the code that tracks and scores, the run's method,
+    mask source and parameters, and the input data. A batch takes what is there and runs the
+    rest; each run is stored as soon as it finishes, so an interrupted batch resumes."""
+
+    # modules that only present results: editing them keeps the runs
+    PRESENTATION = {"notebook.py", "tables.py", "published.py", "download.py", "cli.py"}
+
+    def __init__(self, root: Path):
+        self.root = Path(root)
+        self.code = code_fingerprint(ROOT, exclude={f"dynslam_lite/{m}" for m in self.PRESENTATION},
+                                     patterns=("dynslam_lite/**/*.py",))
+        self._data: dict[str, str] = {}
+
+    def data_id(self, path: str) -> str:
+        """sha256 of a sequence folder's lists and of the names and sizes of its images."""
+        if path not in self._data:
+            root = Path(path)
+            h = hashlib.sha256()
+            for name in ("rgb.txt", "depth.txt", "groundtruth.txt", "scene.json", "instances.json", "camera.txt"):
+                f = root / name
+                h.update(name.encode() + b"\0" + (f.read_bytes() if f.is_file() else b"-") + b"\0")
+            seq = open_sequence(root)
+            for f in seq.rgb_files + seq.depth_files:
+                h.update(f"{f.relative_to(root)} {f.stat().st_size}\n".encode())
+            self._data[path] = h.hexdigest()
+        return self._data[path]
+
+    def key(self, job: Job) -> str:
+        run = job.run
+        spec = {"code": self.code, "data": self.data_id(job.path), "sequence": job.sequence, "label": run.label,
+                "method": run.method, "masks": run.mask_source(job.kind), "params": [list(p) for p in run.params]}
+        return hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+    def get(self, key: str) -> Done | None:
+        f = self.root / f"{key}.json"
+        if not f.is_file():
+            return None
+        try:
+            d = json.loads(f.read_text(encoding="utf-8"))
+            return Done(RunRecord.from_json(d["record"]), d["trajectory"], 0.0)
+        except (ValueError, KeyError, TypeError):
+            return None  # unreadable: run again
+
+    def put(self, key: str, done: Done) -> None:
+        atomic_write_text(self.root / f"{key}.json",
+                          json.dumps({"record": done.record.to_json(), "trajectory": done.trajectory}) + "\n")
+
+
 # ------------------------------------------------------------------ paths
 def file_name(label: str) -> str:
     """A run label (brackets, colons, commas) as a plain file name."""
@@ -270,11 +323,21 @@ def _reproduce(opt: Options) -> int:
             _say(f"[data] synthetic {scene}: {frames} frames at {path}")
         jobs = plan(paths, opt.data)
         t_runs = time.perf_counter()
-        _say(f"[runs] {len(jobs)} runs on {opt.jobs} worker(s)")
-        futures = [pool.submit(evaluate_run, job) for job in jobs]
+        runs = RunCache(cache.parent / "runs")
+        keys = [runs.key(job) for job in jobs]
+        outcomes: list[Done | Failure | None] = [None if opt.fresh else runs.get(k) for k in keys]
+        todo = [i for i, o in enumerate(outcomes) if o is None]
+        _say(f"[runs] {len(jobs)} runs: {len(jobs) - len(todo)} finished earlier (run cache {runs.root}; "
+             f"--fresh runs them again), {len(todo)} to run on {opt.jobs} worker(s)")
+        for k, (job, o) in enumerate(((j, o) for j, o in zip(jobs, outcomes) if o is not None), 1):
+            _say(f"[cached {k}] {job.sequence:32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
+        futures = {pool.submit(evaluate_run, jobs[i]): i for i in todo}
         for k, fut in enumerate(as_completed(futures), 1):
-            _progress(k, len(jobs), fut.result())
-        outcomes = [f.result() for f in futures]  # job order: deterministic tables
+            outcome = fut.result()
+            _progress(k, len(todo), outcome)
+            outcomes[futures[fut]] = outcome
+            if isinstance(outcome, Done):
+                runs.put(keys[futures[fut]], outcome)  # at once: an interrupted batch resumes here
     failed = [o for o in outcomes if isinstance(o, Failure)]
     done = [o for o in outcomes if isinstance(o, Done)]
     records = [d.record for d in done]
@@ -297,7 +360,8 @@ def _reproduce(opt: Options) -> int:
                               if name.startswith("90_") else {"cache_dir": str(cache.resolve())})},
                     writer.tmp / "executed" / f"{name}.ipynb")
                    for name, params in notebooks.items() if opt.notebooks]
-        portable = {out: _relative(opt.reports), str(cache.resolve()): _relative(cache), f"{ROOT}{os.sep}": ""}
+        portable = {out: _relative(opt.reports), str(cache.resolve()): _relative(cache), f"{ROOT}{os.sep}": "",
+                    str(writer.tmp): _relative(opt.reports)}  # papermill's metadata: the relative form
         threads = ThreadPoolExecutor(max_workers=opt.jobs)  # kernels are processes
         try:
             for (name, secs, err), (_, _, path) in zip(threads.map(execute_notebook, nb_jobs), nb_jobs):
@@ -347,8 +411,6 @@ def _command(opt: Options) -> str:
 
 
 def _provenance(opt: Options, prof: dict, frames: int, command: str, fingerprint: str) -> str:
-    import json
-
     return json.dumps({
         "command": command, "profile": opt.profile, "frames": frames, "seed": opt.seed,
         "scenes": list(prof["scenes"]), "data": [_relative(d) for d in opt.data],

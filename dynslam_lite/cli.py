@@ -121,7 +121,7 @@ def cmd_bench(a) -> int:
 def cmd_reproduce(a) -> int:
     """Batch reproduction on the embedded synthetic default (plus --data sequences)."""
     return batch.reproduce(batch.Options(a.profile, a.frames, a.data or [], a.seed, a.jobs, a.cache,
-                                         a.reports, not a.no_notebooks))
+                                         a.reports, not a.no_notebooks, a.fresh))
 
 
 def cmd_download(a) -> int:
@@ -190,6 +190,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--jobs", type=int, default=2, help="worker processes")
     rp.add_argument("--cache", default=str(batch.DEFAULT_CACHE))
     rp.add_argument("--reports", default="reports")
+    rp.add_argument("--fresh", action="store_true",
+                    help="run every run again (default: take the runs finished earlier with the same code, "
+                         "parameters and data from the run cache beside --cache, e.g. after an interruption)")
     rp.add_argument("--no-notebooks", action="store_true",
                     help="tables only: skip the notebooks (figures and executed notebooks in "
                          "reports/ stay as they are)")

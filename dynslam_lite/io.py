@@ -9,6 +9,7 @@ Every problem with the input raises :class:`SequenceError` naming the file and t
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import tempfile
@@ -306,6 +307,8 @@ class Frame:
     rgb : (H, W, 3) uint8, RGB order
     depth : (H, W) float32, metres, 0 = no depth
     mask : (H, W) bool or None, ground-truth moving objects (synthetic sequences only)
+    instances : (H, W) uint8 or None, ground-truth object instance ids (0 = no object)
+    classes : {instance id: class name} of ``instances`` ('person', 'chair', 'board', ...)
     """
 
     index: int
@@ -313,6 +316,8 @@ class Frame:
     rgb: np.ndarray
     depth: np.ndarray
     mask: np.ndarray | None = None
+    instances: np.ndarray | None = None
+    classes: dict[int, str] | None = None
 
     @property
     def gray(self) -> np.ndarray:
@@ -379,6 +384,9 @@ class RGBDSequence:
     depth_timestamps : (N,) float
     groundtruth : Trajectory or None, camera-to-world (Bonn converted to the camera frame)
     mask_files : list[Path or None] or None, ground-truth moving-object masks (synthetic)
+    instance_files : list[Path or None] or None, ground-truth instance ids (synthetic)
+    classes : {instance id: class} of the instance images, or None
+    moving_ids : per frame, the instance ids that move, or None
     """
 
     root: Path
@@ -391,6 +399,9 @@ class RGBDSequence:
     mask_files: list[Path | None] | None = None
     background_files: list[Path | None] | None = None
     name: str = field(default="")
+    instance_files: list[Path | None] | None = None
+    classes: dict[int, str] | None = None
+    moving_ids: list[list[int]] | None = None
 
     def __len__(self) -> int:
         return len(self.timestamps)
@@ -414,7 +425,12 @@ class RGBDSequence:
         mask = None
         if self.mask_files is not None and self.mask_files[i] is not None:
             mask = load_mask(self.mask_files[i])
-        return Frame(i, float(self.timestamps[i]), rgb, depth, mask)
+        instances = None
+        if self.instance_files is not None and self.instance_files[i] is not None:
+            instances = cv2.imread(str(self.instance_files[i]), cv2.IMREAD_UNCHANGED)
+            if instances is None or instances.shape != depth.shape:
+                raise SequenceError(f"{self.instance_files[i]}: unreadable instance image or wrong size")
+        return Frame(i, float(self.timestamps[i]), rgb, depth, mask, instances, self.classes)
 
     def __iter__(self):
         for i in range(len(self)):
@@ -447,6 +463,8 @@ class RGBDSequence:
             None if self.mask_files is None else self.mask_files[sl],
             None if self.background_files is None else self.background_files[sl],
             self.name,
+            None if self.instance_files is None else self.instance_files[sl], self.classes,
+            None if self.moving_ids is None else self.moving_ids[sl],
         )
 
 
@@ -544,6 +562,16 @@ def open_sequence(
     if (root / "masks.txt").is_file():
         mlist = {round(t, 6): root / cols[0] for t, cols in read_file_list(root / "masks.txt")}
         masks = [mlist.get(round(float(ta[i]), 6)) for i, _ in matches]
+    instances = classes = moving = None
+    if (root / "instances.json").is_file():  # synthetic: object instances and which move
+        try:
+            info = json.loads((root / "instances.json").read_text(encoding="utf-8"))
+            classes = {int(k): str(v) for k, v in info["classes"].items()}
+            moving_by_t = {round(float(t), 6): list(ids) for t, ids in info["moving"].items()}
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise SequenceError(f"{root / 'instances.json'}: not an instance list ({exc})") from None
+        instances = [root / "instances" / f"{ta[i]:.6f}.png" for i, _ in matches]
+        moving = [moving_by_t.get(round(float(ta[i]), 6), []) for i, _ in matches]
     backgrounds = None
     if (root / "background.txt").is_file():
         blist = {round(t, 6): root / cols[0] for t, cols in read_file_list(root / "background.txt")}
@@ -551,6 +579,6 @@ def open_sequence(
     seq = RGBDSequence(
         root, cam, rgb_files, depth_files,
         np.array([ta[i] for i, _ in matches]), np.array([tb[j] for _, j in matches]),
-        gt, masks, backgrounds, root.resolve().name,
+        gt, masks, backgrounds, root.resolve().name, instances, classes, moving,
     )
     return seq.window(start, count) if (start or count is not None) else seq

@@ -4,9 +4,12 @@ Papers B and C take instance masks from a segmentation network (YOLOv5s-seg, Mas
 a source is chosen by a spec string (``--masks`` on the command line, ``masks`` in notebooks):
 
 * ``none`` — no masks;
-* ``oracle`` — the synthetic ground-truth masks, split into instances (connected components);
-  ``oracle:degraded`` imitates a real network: dilated or eroded outlines, dropped frames, false
-  blobs (deterministic per seed and frame);
+* ``oracle`` — the synthetic ground truth of the person class (what a person detector gives,
+  the papers' dynamic class), moving or standing still, split into instances (connected
+  components); ``oracle:degraded`` imitates a real network: dilated or eroded outlines, dropped
+  frames, false blobs (deterministic per seed and frame); ``oracle:all`` — every object instance
+  of the synthetic ground truth, people, carried and pushed objects and furniture alike (what an
+  instance segmenter such as paper C's Mask R-CNN gives);
 * ``files:DIR`` — PNG masks computed elsewhere (e.g. YOLOv5-seg or Mask R-CNN run on your
   machine), one per colour frame, named by its timestamp as in TUM's ``rgb/`` folder
   (``1311868164.363181.png``; the nearest within 0.02 s is used). 8- or 16-bit, 0 = background,
@@ -49,7 +52,7 @@ class Degradation:
 
 
 class OracleMasks:
-    """Ground-truth moving-object masks of a synthetic sequence, optionally degraded."""
+    """Ground-truth person masks of a synthetic sequence, optionally degraded."""
 
     def __init__(self, degradation: Degradation | None = None):
         self.degradation = degradation
@@ -59,7 +62,11 @@ class OracleMasks:
         if frame.mask is None:
             raise SequenceError("masks 'oracle' need ground-truth masks (masks/ of a synthetic "
                                 f"sequence); frame {frame.index} has none")
-        inst = split_instances(frame.mask)
+        if frame.instances is not None:  # the person class, moving or not
+            people = [k for k, c in frame.classes.items() if c == "person"]
+            inst = split_instances(np.isin(frame.instances, people))
+        else:  # sequences written before instances: every moving object was a person
+            inst = split_instances(frame.mask)
         d = self.degradation
         if d is None:
             return inst
@@ -80,6 +87,23 @@ class OracleMasks:
             cv2.ellipse(blob, c, (int(rng.integers(15, 60)), int(rng.integers(15, 60))), 0, 0, 360, 1, -1)
             out.append(blob.astype(bool))
         return out
+
+
+class AllObjectMasks:
+    """Every ground-truth object instance of a synthetic sequence (``oracle:all``), each one
+    instance whatever its class; at least ``min_area`` pixels."""
+
+    name = "oracle:all"
+
+    def __init__(self, min_area: int = 50):
+        self.min_area = min_area
+
+    def __call__(self, frame: Frame) -> list[np.ndarray]:
+        if frame.instances is None:
+            raise SequenceError("masks 'oracle:all' need ground-truth instances (instances/ of a "
+                                f"synthetic sequence); frame {frame.index} has none")
+        ids, counts = np.unique(frame.instances, return_counts=True)
+        return [frame.instances == k for k, n in zip(ids, counts) if k and n >= self.min_area]
 
 
 class FileMasks:
@@ -124,7 +148,7 @@ class FileMasks:
         return [img == i for i in ids]
 
 
-SOURCES = "none, oracle, oracle:degraded, files:DIR, person, person:landscape or onnx:PATH"
+SOURCES = "none, oracle, oracle:degraded, oracle:all, files:DIR, person, person:landscape or onnx:PATH"
 
 
 def make_mask_source(spec: str):
@@ -134,6 +158,8 @@ def make_mask_source(spec: str):
         return NoMasks()
     if kind == "oracle" and arg in ("", "degraded"):
         return OracleMasks(Degradation() if arg else None)
+    if kind == "oracle" and arg == "all":
+        return AllObjectMasks()
     if kind == "files" and arg:
         return FileMasks(arg)
     if kind == "person" and arg in ("", "square", "landscape"):

@@ -85,12 +85,13 @@ def _meaning(path: Path) -> str:
     return json.dumps(yaml.safe_load(text), sort_keys=True)
 
 
-def code_fingerprint(repo: str | Path) -> str:
-    """sha256 over what produces the reports (:data:`FINGERPRINTED`, by relative path): a
+def code_fingerprint(repo: str | Path, exclude: set[str] = frozenset({"dynslam_lite/download.py"}),
+                     patterns: tuple[str, ...] = FINGERPRINTED) -> str:
+    """sha256 over what produces the reports (``patterns`` less ``exclude``, by relative path): a
     comment, docstring or Markdown edit keeps it, any change of code or parameters changes it."""
     repo = Path(repo)
     h = hashlib.sha256()
-    files = sorted({p for pattern in FINGERPRINTED for p in repo.glob(pattern)} - {repo / "dynslam_lite/download.py"})
+    files = sorted({p for pattern in patterns for p in repo.glob(pattern)} - {repo / e for e in exclude})
     for path in files:
         h.update(path.relative_to(repo).as_posix().encode() + b"\0" + _meaning(path).encode() + b"\0")
     return h.hexdigest()

@@ -22,7 +22,7 @@ def render_clean(renderer, T_w_c, s=None):
 
     r = renderer
     groups = [p.boxes(s) for p in r.people] if s is not None else []
-    rgb, depth, dyn, _ = render(r.camera, T_w_c, r.static, groups, r.textures, LIGHT_W, r.rays)
+    rgb, depth, dyn, _, _ = render(r.camera, T_w_c, r.static, groups, r.textures, LIGHT_W, r.rays)
     gray = (rgb @ np.array([0.299, 0.587, 0.114], np.float32)).astype(np.float32)
     return gray, np.where(np.isfinite(depth), depth, 0).astype(np.float32), dyn
 

@@ -136,7 +136,7 @@ def test_restoration_recovers_the_true_background_better_than_telea():
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
 
     def frame(i, people=True):
-        rgb, d, m = r.frame(i, t[i] - T0, people)
+        rgb, d, m, _ = r.frame(i, t[i] - T0, people)
         return rgb, d, cv2.dilate(m.astype(np.uint8), k) > 0, r.pose(t[i] - T0)
 
     kfs = []

@@ -80,9 +80,15 @@ def test_reproduce_tiny_writes_every_indexed_file_and_a_failed_run_keeps_reports
     assert len(runs) == 19 and all((reports / "trajectories" / r["trajectory"]).exists() for r in runs)
     figures = sorted(p.name for p in (reports / "figures").iterdir())
     tables = {p.name: p.read_bytes() for p in (reports / "tables").iterdir() if p.stem not in TIMED}
-    assert main(args + ["--no-notebooks"]) == 0
+    assert main(args + ["--no-notebooks", "--fresh"]) == 0
     again = {p.name: p.read_bytes() for p in (reports / "tables").iterdir() if p.stem not in TIMED}
     assert again == tables  # deterministic, and notebook 90's tables equal the batch's own
+    capsys.readouterr()
+    assert main(args + ["--no-notebooks"]) == 0  # every run taken from the run cache
+    out = capsys.readouterr().out
+    assert "19 finished earlier" in out and out.count("[cached ") == 19 and "[run 1/" not in out
+    cached = {p.name: p.read_bytes() for p in (reports / "tables").iterdir()}
+    assert {k: v for k, v in cached.items() if k.split(".")[0] not in TIMED} == tables
     assert sorted(p.name for p in (reports / "figures").iterdir()) == figures  # left in place
     bad = tmp_path / "rgbd_broken"
     bad.mkdir()

@@ -3,6 +3,7 @@ bugs reported as bugs (exit 3), runs that mostly failed (exit 1), Ctrl-C / SIGTE
 no process left, reports/ untouched), and the package usable from any folder."""
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -127,13 +128,18 @@ def _session_alive(sid: int) -> list[int]:
     return alive
 
 
-def _interrupt(cmd, sig, after_s, to_group, cwd=ROOT):
-    """Start ``cmd`` in a session of its own, send ``sig`` after ``after_s``; (rc, seconds to
-    exit, stderr, live processes left)."""
+def _interrupt(cmd, sig, after, to_group, cwd=ROOT):
+    """Start ``cmd`` in a session of its own and send ``sig`` ``after`` seconds, or (a string)
+    once a line starting with it was printed; (rc, seconds to exit, stderr, live processes left)."""
     p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          start_new_session=True)
     try:
-        time.sleep(after_s)
+        if isinstance(after, str):
+            deadline = time.monotonic() + 300
+            while not p.stdout.readline().startswith(after):
+                assert time.monotonic() < deadline and p.poll() is None, f"no line {after!r}"
+        else:
+            time.sleep(after)
         t = time.monotonic()
         if to_group:
             os.killpg(p.pid, sig)  # what a terminal's Ctrl-C does
@@ -155,19 +161,31 @@ def _tree(folder: Path) -> dict:
 
 
 @pytest.mark.parametrize("sig, to_group", [(signal.SIGINT, True), (signal.SIGTERM, False)], ids=["ctrl-c", "sigterm"])
-def test_reproduce_stops_at_once_on_interrupt_and_keeps_reports(tmp_path, sig, to_group):
+def test_reproduce_stops_at_once_on_interrupt_keeps_reports_and_resumes(tmp_path, sig, to_group, capsys):
     reports = tmp_path / "reports"
     (reports / "tables").mkdir(parents=True)
     (reports / "tables" / "summary.md").write_text("an earlier run\n")
     before = _tree(reports)
     cmd = [sys.executable, "-m", "dynslam_lite", "reproduce", "--profile", "tiny", "--jobs", "2",
            "--cache", str(tmp_path / "cache"), "--reports", str(reports)]
-    rc, took, err, left = _interrupt(cmd, sig, 8, to_group)
+    # Ctrl-C once three runs have finished; SIGTERM early, while the scenes are generated
+    rc, took, err, left = _interrupt(cmd, sig, "[run 3/" if sig == signal.SIGINT else 8, to_group)
     assert rc == 130 and took < 10, (rc, took, err)
     lines = [l for l in err.strip().splitlines() if l.startswith("interrupted")]
     assert len(lines) == 1 and "left as it was" in lines[0] and "Traceback" not in err, err
     assert not left, left
     assert _tree(reports) == before and not list(reports.glob(".tmp*"))
+    if sig == signal.SIGINT:  # resumed: the runs finished before the interrupt are not repeated
+        resumed, fresh = tmp_path / "resumed", tmp_path / "fresh"
+        base = ["reproduce", "--profile", "tiny", "--jobs", "2", "--cache", str(tmp_path / "cache"), "--no-notebooks"]
+        capsys.readouterr()
+        assert main(base + ["--reports", str(resumed)]) == 0
+        done = int(re.search(r"(\d+) finished earlier", capsys.readouterr().out).group(1))
+        assert 3 <= done < 19, done
+        assert main(base + ["--reports", str(fresh), "--fresh"]) == 0
+        timed = ("timing.md", "timing.csv", "paper_b_table4.md", "paper_b_table4.csv")
+        tables = {f: b for f, b in _tree(resumed / "tables").items() if f not in timed}
+        assert tables == {f: b for f, b in _tree(fresh / "tables").items() if f not in timed}
 
 
 def test_run_stops_at_once_on_ctrl_c_and_writes_nothing(clip, tmp_path):

@@ -51,7 +51,7 @@ def test_static_scene_has_no_moving_pixels(scene):
 
 def test_depth_noise_grows_with_distance_and_edges_drop():
     r = SceneRenderer("static_xyz", 0)
-    _, true_depth, _, no_depth = render(r.camera, r.pose(0.0), r.static, [], r.textures,
+    _, true_depth, _, no_depth, _ = render(r.camera, r.pose(0.0), r.static, [], r.textures,
                                         np.array([0, 0, 1.0]), r.rays)
     rng = np.random.default_rng(0)
     noisy = degrade_depth(true_depth, no_depth, rng)
@@ -70,3 +70,52 @@ def test_depth_noise_grows_with_distance_and_edges_drop():
 def test_unknown_scene_rejected(tmp_path):
     with pytest.raises(ValueError, match="unknown synthetic scene"):
         generate(tmp_path / "x", "dancing_xyz", 2)
+
+
+def _classes_at(r: SceneRenderer, s: float):
+    """(instance image, {id: class}, moving ids) of a noise-free render at time s."""
+    _, _, moving, inst = r.frame(int(s * 30), s)
+    return inst, r.classes, set(r.moving_ids(s)), moving
+
+
+def test_carried_objects_are_instances_of_their_own_class_that_move_with_their_carrier():
+    r = SceneRenderer("walking_carry", 0)
+    inst, classes, moving, mask = _classes_at(r, 1.0)
+    board = [k for k, c in classes.items() if c == "board"]
+    box = [k for k, c in classes.items() if c == "box" and k in moving]
+    assert len(board) == 1 and len(box) == 1 and board[0] in moving
+    assert (inst == board[0]).mean() > 0.01  # the board is in view, not painted as a person
+    assert np.array_equal(mask, np.isin(inst, sorted(moving)))  # moving mask = moving instances
+
+
+def test_pushed_chair_moves_only_while_pushed_and_a_person_stands_still():
+    r = SceneRenderer("walking_push", 0)
+    chair = next(k for k in r.mover_ids)
+    assert r.classes[chair] == "chair"
+    assert chair not in r.moving_ids(0.5) and chair in r.moving_ids(2.0) and chair not in r.moving_ids(4.5)
+    standing = r.person_ids[1]
+    assert standing not in r.moving_ids(2.0) and standing in r.moving_ids(0.5)
+    inst, _, moving, mask = _classes_at(r, 2.0)
+    assert (inst == standing).any() and not mask[inst == standing].any()  # in view, not moving
+    assert mask[inst == chair].all() and (inst == chair).sum() > 2000
+
+
+def test_crowd_fills_over_half_the_image_and_oracle_masks_are_people_only(tmp_path):
+    from dynslam_lite.masks import make_mask_source
+
+    r = SceneRenderer("crowd", 0)
+    cover = []
+    for s in np.arange(0.0, 5.0, 0.25):
+        inst, classes, _, _ = _classes_at(r, s)
+        cover.append(np.isin(inst, r.person_ids).mean())
+    assert max(cover) > 0.5 and min(cover) > 0.02, np.round(cover, 2)  # over half, never empty
+    seq = open_sequence(generate(tmp_path / "carry", "walking_carry", 3, 0).path)
+    f = seq[2]
+    people = np.isin(f.instances, [k for k, c in f.classes.items() if c == "person"])
+    oracle = np.logical_or.reduce(make_mask_source("oracle")(f))
+    board = np.isin(f.instances, [k for k, c in f.classes.items() if c == "board"])
+    # what a person detector gives: the people (components of 50 px and more), not the board
+    assert not (oracle & ~people).any() and oracle.sum() > 0.98 * people.sum() and board.sum() > 1000
+    every = make_mask_source("oracle:all")(f)
+    classes_seen = {f.classes[int(f.instances[m][0])] for m in every}
+    assert {"person", "board", "table"} <= classes_seen

@@ -5,6 +5,9 @@ Output folder::
     rgb/, depth/, rgb.txt, depth.txt   colour 8-bit / depth 16-bit (5000 per metre) PNGs
     groundtruth.txt                    camera-to-world at 100 Hz (mocap-like, exact)
     masks/, masks.txt                  ground-truth moving-object masks, 255 = moving
+    instances/, instances.json         object instance ids per pixel (8-bit, 0 = room), each id's
+                                       class (person, board, box, chair, table, ...) and per frame
+                                       the ids that move
     background/, background.txt        (with background=True) frames without the people
     camera.txt                         fx fy cx cy width height depth_scale
     scene.json                         scene, seed, frame count, generator version
@@ -29,7 +32,8 @@ from ..errors import ConfigError
 from ..geometry import PinholeCamera
 from ..io import Trajectory, format_trajectory
 from .raycast import pixel_rays, render
-from .scene import SCENES, camera_pose, chairs_for, pattern_of, people_for, static_boxes
+from .scene import (FURNITURE, SCENES, camera_pose, chairs_for, furniture_names, movers_for, pattern_of,
+                    people_for, static_boxes)
 from .sensor import degrade_depth, degrade_rgb
 from .textures import make_textures
 
@@ -38,7 +42,7 @@ SYNTH_CAMERA = PinholeCamera(535.4, 539.2, 320.1, 247.6, 640, 480, 5000.0, name=
 FPS = 30.0
 GT_RATE_HZ = 100.0
 T0 = 1600000000.0
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 LIGHT_W = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
 
 
@@ -64,26 +68,58 @@ class SceneRenderer:
         self.seed = int(seed)
         self.camera = camera
         self.textures = make_textures(self.seed)
-        self.static = static_boxes() + chairs_for(scene)
         self.people = people_for(scene)
+        self.movers = movers_for(scene)
+        # instance ids: people, their carried objects, moved objects, then the furniture
+        self.classes: dict[int, str] = {}
+        self.person_ids = [self._new_id("person") for _ in self.people]
+        self.carried_ids = [self._new_id(p.carry) if p.carry else 0 for p in self.people]
+        self.mover_ids = [self._new_id(m.cls) for m in self.movers]
+        self.static = static_boxes() + chairs_for(scene)
+        names = furniture_names() + ["chair"] * (len(self.static) - len(furniture_names()))
+        ids: dict[str, int] = {}
+        for k, (box, name) in enumerate(zip(self.static, names)):
+            if name is not None:
+                key = name if k < len(furniture_names()) else f"stool{k}"
+                if key not in ids:
+                    ids[key] = self._new_id(FURNITURE.get(name, name))
+                box.instance = ids[key]
         rng = np.random.default_rng([self.seed, 1])
         self.jitter = np.stack(
             [rng.uniform(0.3, 1.0, 4), rng.uniform(0.5, 3.0, 4), rng.uniform(0, 2 * np.pi, 4)], axis=1
         )
         self.rays = pixel_rays(camera)
 
+    def _new_id(self, cls: str) -> int:
+        k = len(self.classes) + 1
+        self.classes[k] = cls
+        return k
+
     def pose(self, s: float) -> np.ndarray:
         """(4, 4) camera-to-world at ``s`` seconds after the first frame."""
         return camera_pose(self.pattern, s, self.jitter)
 
+    def moving_ids(self, s: float) -> list[int]:
+        """Instance ids of the objects that move at time ``s`` (a person standing still does not;
+        a carried object moves with its carrier)."""
+        out = []
+        for p, pid, cid in zip(self.people, self.person_ids, self.carried_ids):
+            if p.moving(s):
+                out += [pid] + ([cid] if cid else [])
+        return out + [mid for m, mid in zip(self.movers, self.mover_ids) if m.moving(s)]
+
     def frame(self, index: int, s: float, with_people: bool = True):
-        """Render frame ``index`` at time ``s``: (rgb uint8, depth float32 m, moving mask bool)."""
-        groups = [p.boxes(s) for p in self.people] if with_people else []
-        rgb, depth, dynamic, no_depth = render(
-            self.camera, self.pose(s), self.static, groups, self.textures, LIGHT_W, self.rays
+        """Render frame ``index`` at time ``s``: (rgb uint8, depth float32 m, moving mask bool,
+        instance ids uint8). Without people, the moving objects are left out too (the background)."""
+        groups = ([p.boxes(s, pid, cid) for p, pid, cid in zip(self.people, self.person_ids, self.carried_ids)]
+                  if with_people else [])
+        boxes = self.static + ([m.box(s, mid) for m, mid in zip(self.movers, self.mover_ids)] if with_people else [])
+        rgb, depth, _, no_depth, instance = render(
+            self.camera, self.pose(s), boxes, groups, self.textures, LIGHT_W, self.rays
         )
+        moving = np.isin(instance, self.moving_ids(s))
         rng = np.random.default_rng([self.seed, 2, index])  # per frame: order-independent
-        return degrade_rgb(rgb, rng), degrade_depth(depth, no_depth, rng), dynamic
+        return degrade_rgb(rgb, rng), degrade_depth(depth, no_depth, rng), moving, instance
 
 
 def _timestamps(frames: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -124,12 +160,13 @@ def generate(
     try:
         renderer = SceneRenderer(scene, seed)
         cam = renderer.camera
-        for sub in ("rgb", "depth", "masks") + (("background", "background_depth") if background else ()):
+        for sub in ("rgb", "depth", "masks", "instances") + (("background", "background_depth") if background else ()):
             (tmp / sub).mkdir()
         t_rgb, t_depth = _timestamps(frames, seed)
         png = [cv2.IMWRITE_PNG_COMPRESSION, 1]
         names = [f"{t:.6f}.png" for t in t_rgb]
         dnames = [f"{t:.6f}.png" for t in t_depth]
+        moving_ids: list[list[int]] = []
         iterator = range(frames)
         if progress:
             from tqdm import tqdm
@@ -137,12 +174,14 @@ def generate(
             iterator = tqdm(iterator, desc=f"synth {scene}", unit="frame")
         for i in iterator:
             s = t_rgb[i] - T0
-            rgb, depth, moving = renderer.frame(i, s)
+            rgb, depth, moving, instance = renderer.frame(i, s)
             cv2.imwrite(str(tmp / "rgb" / names[i]), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), png)
             cv2.imwrite(str(tmp / "depth" / dnames[i]), np.round(depth * 5000).astype(np.uint16), png)
             cv2.imwrite(str(tmp / "masks" / names[i]), moving.astype(np.uint8) * 255, png)
+            cv2.imwrite(str(tmp / "instances" / names[i]), instance, png)
+            moving_ids.append(renderer.moving_ids(s))
             if background:
-                bg, bg_depth, _ = renderer.frame(i, s, with_people=False)
+                bg, bg_depth, _, _ = renderer.frame(i, s, with_people=False)
                 cv2.imwrite(str(tmp / "background" / names[i]), cv2.cvtColor(bg, cv2.COLOR_RGB2BGR), png)
                 cv2.imwrite(str(tmp / "background_depth" / names[i]),
                             np.round(bg_depth * 5000).astype(np.uint16), png)
@@ -157,6 +196,9 @@ def generate(
         listing("ground-truth moving-object masks (255 = moving)", "masks", t_rgb, names)
         if background:
             listing("colour frames rendered without moving objects", "background", t_rgb, names)
+        (tmp / "instances.json").write_text(json.dumps(
+            {"classes": {str(k): c for k, c in renderer.classes.items()},
+             "moving": {f"{t:.6f}": ids for t, ids in zip(t_rgb, moving_ids)}}, indent=1) + "\n")
         t_gt = np.arange(t_rgb[0] - 0.1, t_rgb[-1] + 0.1, 1.0 / GT_RATE_HZ)
         gt = Trajectory(t_gt, np.stack([renderer.pose(t - T0) for t in t_gt]))
         (tmp / "groundtruth.txt").write_text(

@@ -26,8 +26,9 @@ class Box:
     half : (3,) float, half extents along the box axes (metres)
     texture : int, index into the texture list
     inside : bool, True for the room: rays start inside and hit its far faces
-    dynamic : bool, True for moving objects (people): marks ground-truth masks
+    dynamic : bool, part of an object that can move (people, carried and pushed objects)
     no_depth : bool, surface the depth sensor cannot see (glossy / black)
+    instance : int, object instance id for the instance masks (0 = room, no object)
     """
 
     T_w_b: np.ndarray
@@ -36,6 +37,7 @@ class Box:
     inside: bool = False
     dynamic: bool = False
     no_depth: bool = False
+    instance: int = 0
 
 
 @dataclass
@@ -73,6 +75,12 @@ def _slab(box: Box, origin: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     return np.where((tnear <= tfar) & (tnear > 1e-4), tnear, np.inf).astype(np.float32)
 
 
+def _contains(box: Box, point: np.ndarray) -> bool:
+    """Whether ``point`` (3,) lies inside ``box``."""
+    local = box.T_w_b[:3, :3].T @ (point - box.T_w_b[:3, 3])
+    return bool(np.all(np.abs(local) <= box.half))
+
+
 def _screen_rect(camera: PinholeCamera, T_c_w: np.ndarray, box: Box) -> np.ndarray | None:
     """Flat indices of the pixels inside the projected bounding rectangle of a box, or None
     (= all pixels) when the box reaches behind the camera."""
@@ -100,7 +108,7 @@ def render(
     textures: list[np.ndarray],
     light_w: np.ndarray,
     rays_c: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Render colour, true depth and masks of a scene from one camera pose.
 
     Parameters
@@ -113,8 +121,9 @@ def render(
     -------
     rgb : (H, W, 3) float32 in [0, 1], Lambertian shading, noise-free
     depth : (H, W) float32 metres along the optical axis (inf = nothing hit)
-    dynamic : (H, W) bool, pixels showing a moving object
+    dynamic : (H, W) bool, pixels showing an object that can move
     no_depth : (H, W) bool, pixels on surfaces the depth sensor cannot see
+    instance : (H, W) uint8, object instance id of each pixel (0 = room)
     """
     H, W = camera.height, camera.width
     rays_c = pixel_rays(camera) if rays_c is None else rays_c
@@ -146,8 +155,11 @@ def render(
     for group in groups:
         rect = _screen_rect(camera, T_c_w, group.bound)
         rect = np.arange(n) if rect is None else rect
-        tb = _slab(group.bound, origin, dirs[:, rect])
-        idx = rect[tb < t_best[rect]]
+        if _contains(group.bound, origin):  # a body closer than its bound: no ray enters it
+            idx = rect
+        else:
+            tb = _slab(group.bound, origin, dirs[:, rect])
+            idx = rect[tb < t_best[rect]]
         if idx.size:
             for part in group.parts:
                 consider(part, idx)
@@ -155,6 +167,7 @@ def render(
     rgb = np.zeros((n, 3), np.float32)
     dynamic = np.zeros(n, bool)
     no_depth = np.zeros(n, bool)
+    instance = np.zeros(n, np.uint8)
     order = np.argsort(prim, kind="stable")
     bounds = np.searchsorted(prim[order], np.arange(len(all_boxes) + 1))
     for k, box in enumerate(all_boxes):
@@ -183,9 +196,11 @@ def render(
         rgb[sel] = colour * shade[:, None]
         dynamic[sel] = box.dynamic
         no_depth[sel] = box.no_depth
+        instance[sel] = box.instance
     return (
         rgb.reshape(H, W, 3),
         t_best.reshape(H, W),
         dynamic.reshape(H, W),
         no_depth.reshape(H, W),
+        instance.reshape(H, W),
     )

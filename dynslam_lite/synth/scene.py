@@ -13,11 +13,23 @@ from ..geometry import se3_exp, so3_exp
 from .raycast import Box, Group
 from .textures import material
 
-SCENES = (
+# the TUM fr3 analogues (the papers' sequences), then ours: scenes with the cases papers B and C
+# are about: a carried board and box (not people, moving), a pushed chair (a static class that
+# moves), people standing still for a while, and a crowd passing close to the camera
+TUM_SCENES = (
     "walking_static", "walking_xyz", "walking_rpy", "walking_halfsphere",
     "sitting_static", "sitting_xyz", "sitting_rpy", "sitting_halfsphere",
     "static_xyz",
 )
+OBJECT_SCENES = ("walking_carry", "walking_push", "crowd")
+SCENES = TUM_SCENES + OBJECT_SCENES
+_PATTERN = {"walking_carry": "xyz", "walking_push": "halfsphere", "crowd": "xyz"}
+
+# object classes of the furniture (what an instance segmenter such as Mask R-CNN would label);
+# boxes of one object share its name
+FURNITURE = {"desk": "table", "screen": "tv", "desk_box": "box", "desk_books": "book", "shelf": "book",
+             "cabinet": "cabinet", "poster_board": "poster", "poster": "poster", "side_cabinet": "cabinet",
+             "side_books": "book", "chair": "chair"}
 
 
 def _pose(R=None, t=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -41,7 +53,8 @@ def _box(centre, half, mat, yaw=0.0, **kw) -> Box:
 
 
 def static_boxes() -> list[Box]:
-    """Room (seen from inside) and furniture; all static."""
+    """Room (seen from inside) and furniture; all static. Furniture instances: see
+    :func:`furniture_names` (same order)."""
     return [
         # room: x in [-3, 3], y in [-2.2, 3.4], z in [0, 2.8]; wall/floor/ceiling textures by face
         _box((0.0, 0.6, 1.4), (3.0, 2.8, 1.42), "wall", inside=True),
@@ -82,6 +95,9 @@ class Person:
     speed : float, m/s, walking speed
     phase : float, seconds, offset of this person's motion in time
     shirt : str, material of the shirt
+    carry : None, 'board' or 'box': an object carried in front of the body (not part of the
+        person class: its own instance)
+    pause : (start, duration) seconds during which a walking person stands still
     """
 
     mode: str
@@ -91,10 +107,22 @@ class Person:
     speed: float = 0.8
     phase: float = 0.0
     shirt: str = "shirt_a"
+    carry: str | None = None
+    pause: tuple[float, float] | None = None
+
+    def moving(self, s: float) -> bool:
+        """Whether the person moves at time ``s`` (standing still during a pause)."""
+        return self.pause is None or not self.pause[0] <= s < self.pause[0] + self.pause[1]
+
+    def _clock(self, s: float) -> float:
+        """Walking time: frozen during the pause."""
+        if self.pause is None or s < self.pause[0]:
+            return s
+        return self.pause[0] if s < self.pause[0] + self.pause[1] else s - self.pause[1]
 
     def root_and_angles(self, s: float) -> tuple[np.ndarray, dict[str, float]]:
         """Body root pose (4, 4) in the world and joint angles (radians) at time ``s``."""
-        s = s + self.phase
+        s = self._clock(s) + self.phase
         if self.mode == "walk":
             period = 2.0 * self.span / self.speed
             u = (s % period) / period
@@ -123,13 +151,14 @@ class Person:
         }
         return _pose(R, np.asarray(self.base) + [0.0, 0.0, -0.42]), angles
 
-    def boxes(self, s: float) -> Group:
-        """Body parts as boxes at time ``s``, grouped under one bounding box for culling."""
+    def boxes(self, s: float, instance: int = 0, carried: int = 0) -> Group:
+        """Body parts as boxes at time ``s``, grouped under one bounding box for culling;
+        ``instance`` / ``carried``: instance ids of the body and of the carried object."""
         T_w_r, a = self.root_and_angles(s)
         parts: list[Box] = []
 
-        def part(T_r_p, half, mat):
-            parts.append(Box(T_w_r @ T_r_p, np.asarray(half, float), material(mat), dynamic=True))
+        def part(T_r_p, half, mat, inst=instance):
+            parts.append(Box(T_w_r @ T_r_p, np.asarray(half, float), material(mat), dynamic=True, instance=inst))
 
         T_torso = _pose(_rx(a["torso"]), (0.0, 0.0, 0.87)) @ _pose(None, (0.0, 0.0, 0.28))
         part(T_torso, (0.18, 0.11, 0.28), self.shirt)
@@ -144,13 +173,43 @@ class Person:
             part(T_hip @ _pose(None, (0.0, 0.0, -0.21)), (0.075, 0.08, 0.21), "trousers")
             T_kn = T_hip @ _pose(_rx(a["knee_" + side]), (0.0, 0.0, -0.42))
             part(T_kn @ _pose(None, (0.0, 0.0, -0.2)), (0.06, 0.07, 0.2), "trousers")
+        if self.carry == "board":  # held upright in front of the chest, wider than the body
+            part(_pose(None, (0.0, 0.3, 1.1)), (0.38, 0.02, 0.32), "poster", carried)
+        elif self.carry == "box":
+            part(_pose(None, (0.0, 0.32, 1.05)), (0.2, 0.16, 0.15), "cabinet", carried)
         # bounding box of the whole body: generous, centred on the root
         bound = Box(T_w_r @ _pose(None, (0.0, 0.0, 0.95)), np.array([0.75, 0.75, 1.0]), 0)
         return Group(bound, parts)
 
 
+def furniture_names() -> list[str | None]:
+    """The object (a key of :data:`FURNITURE`) each box of :func:`static_boxes` belongs to;
+    None for the room."""
+    return [None, None, None, "desk", "desk", "desk", "screen", "desk_box", "desk_books", "shelf", "cabinet",
+            "poster_board", "poster", "side_cabinet", "side_books", "chair"]
+
+
 def people_for(scene: str) -> list[Person]:
     """The people of a named scene (none for static_*)."""
+    if scene == "walking_carry":
+        return [  # one carries a board across the view, the other a box along the back
+            Person("walk", (-1.9, 0.9, 0.0), 0.0, span=3.8, speed=0.75, phase=1.5, shirt="shirt_a", carry="board"),
+            Person("walk", (1.6, 2.0, 0.0), np.pi - 0.15, span=3.2, speed=0.6, phase=0.0, shirt="shirt_b",
+                   carry="box"),
+        ]
+    if scene == "walking_push":
+        return [  # pushes the chair (see movers_for); the other stands still for 2 s, then walks on
+            Person("walk", PUSH_START - 0.55 * PUSH_DIR, float(np.arctan2(PUSH_DIR[1], PUSH_DIR[0])),
+                   span=PUSH_SPAN, speed=PUSH_SPAN / (PUSH_T1 - PUSH_T0), phase=-PUSH_T0, shirt="shirt_b"),
+            Person("walk", (1.6, 2.2, 0.0), np.pi - 0.15, span=3.0, speed=0.6, phase=0.5, shirt="shirt_a",
+                   pause=(1.0, 2.0)),
+        ]
+    if scene == "crowd":
+        return [  # one passes about 0.9 m in front of the camera, fast; two further back, one stops
+            Person("walk", (-1.7, -0.1, 0.0), 0.0, span=3.4, speed=1.2, phase=0.3, shirt="shirt_b"),
+            Person("walk", (-1.9, 0.9, 0.0), 0.0, span=3.8, speed=0.75, phase=1.5, shirt="shirt_a", pause=(2.5, 1.5)),
+            Person("walk", (1.6, 2.0, 0.0), np.pi - 0.15, span=3.2, speed=0.6, phase=0.0, shirt="shirt_b"),
+        ]
     if scene.startswith("walking"):
         return [
             # near person crossing the view about 2 m from the camera, far one behind
@@ -162,6 +221,43 @@ def people_for(scene: str) -> list[Person]:
             Person("sit", (-0.45, 1.95, 0.0), np.pi / 2 + 0.3, shirt="shirt_a"),
             Person("sit", (0.75, 1.85, 0.0), np.pi / 2 - 0.4, phase=2.0, shirt="shirt_b"),
         ]
+    return []
+
+
+# walking_push: a chair pushed 1.6 m across the floor between 1.0 s and 4.0 s
+PUSH_START = np.array([-1.1, 1.3, 0.0])
+PUSH_DIR = np.array([1.0, 0.15, 0.0]) / np.linalg.norm([1.0, 0.15, 0.0])
+PUSH_SPAN = 1.6
+PUSH_T0, PUSH_T1 = 1.0, 4.0
+
+
+@dataclass
+class Mover:
+    """An object of a static class (a chair) moved along the floor between t0 and t1 (seconds)."""
+
+    cls: str
+    half: tuple[float, float, float]
+    mat: str
+    start: np.ndarray
+    direction: np.ndarray
+    span: float
+    t0: float
+    t1: float
+
+    def moving(self, s: float) -> bool:
+        return self.t0 < s < self.t1
+
+    def box(self, s: float, instance: int) -> Box:
+        a = float(np.clip((s - self.t0) / (self.t1 - self.t0), 0.0, 1.0))
+        centre = self.start + a * self.span * self.direction + [0.0, 0.0, self.half[2]]
+        yaw = float(np.arctan2(self.direction[1], self.direction[0]))
+        return _box(centre, self.half, self.mat, yaw=yaw, dynamic=True, instance=instance)
+
+
+def movers_for(scene: str) -> list[Mover]:
+    """Objects of static classes that move in a scene (walking_push's chair)."""
+    if scene == "walking_push":
+        return [Mover("chair", (0.22, 0.22, 0.45), "chair", PUSH_START, PUSH_DIR, PUSH_SPAN, PUSH_T0, PUSH_T1)]
     return []
 
 
@@ -228,7 +324,7 @@ def camera_pose(pattern: str, s: float, jitter: np.ndarray) -> np.ndarray:
 
 
 def pattern_of(scene: str) -> str:
-    """Camera motion pattern of a scene name: the part after the last underscore."""
+    """Camera motion pattern of a scene: the part after the last underscore of the TUM analogues."""
     if scene not in SCENES:
         raise ValueError(f"unknown synthetic scene {scene!r}: choose one of {', '.join(SCENES)}")
-    return scene.rsplit("_", 1)[1]
+    return _PATTERN.get(scene) or scene.rsplit("_", 1)[1]
