@@ -168,8 +168,9 @@ def test_reproduce_stops_at_once_on_interrupt_keeps_reports_and_resumes(tmp_path
     before = _tree(reports)
     cmd = [sys.executable, "-m", "dynslam_lite", "reproduce", "--profile", "tiny", "--jobs", "2",
            "--cache", str(tmp_path / "cache"), "--reports", str(reports)]
-    # Ctrl-C once three runs have finished; SIGTERM early, while the scenes are generated
-    rc, took, err, left = _interrupt(cmd, sig, "[run 3/" if sig == signal.SIGINT else 8, to_group)
+    # Ctrl-C once four runs have finished (the last one printed may not be stored yet); SIGTERM
+    # early, while the scenes are generated
+    rc, took, err, left = _interrupt(cmd, sig, "[run 4/" if sig == signal.SIGINT else 8, to_group)
     assert rc == 130 and took < 10, (rc, took, err)
     lines = [l for l in err.strip().splitlines() if l.startswith("interrupted")]
     assert len(lines) == 1 and "left as it was" in lines[0] and "Traceback" not in err, err
