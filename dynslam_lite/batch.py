@@ -30,7 +30,7 @@ from .experiments import Run, RunRecord
 from .io import atomic_write_text, format_trajectory, open_sequence, parse_trajectory
 from .pipeline import run_method
 from .reports import ReportWriter, code_fingerprint, fmt
-from .synth import TUM_SCENES, ensure_scene
+from .synth import SCENES, ensure_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOK_DIR = ROOT / "notebooks"
@@ -94,7 +94,7 @@ def load_registry(path: Path = REGISTRY) -> tuple[dict, dict]:
     except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
         raise ConfigError(f"{path}: not a readable reproduction registry ({exc})") from exc
     for prof in profiles.values():
-        prof["scenes"] = tuple(TUM_SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
+        prof["scenes"] = tuple(SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
     for name, params in notebooks.items():
         if not (NOTEBOOK_DIR / f"{name}.ipynb").exists():
             raise ConfigError(f"{path}: notebook {name}.ipynb does not exist")
@@ -334,10 +334,10 @@ def _reproduce(opt: Options) -> int:
         futures = {pool.submit(evaluate_run, jobs[i]): i for i in todo}
         for k, fut in enumerate(as_completed(futures), 1):
             outcome = fut.result()
-            _progress(k, len(todo), outcome)
             outcomes[futures[fut]] = outcome
             if isinstance(outcome, Done):
                 runs.put(keys[futures[fut]], outcome)  # at once: an interrupted batch resumes here
+            _progress(k, len(todo), outcome)
     failed = [o for o in outcomes if isinstance(o, Failure)]
     done = [o for o in outcomes if isinstance(o, Done)]
     records = [d.record for d in done]

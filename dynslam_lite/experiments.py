@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .evaluation import ErrorStats, MaskScores, TrajectoryErrors
+from .synth.scene import OBJECT_SCENES, TUM_SCENES
 
 # The semantic mask source a run takes from its data: the synthetic ground truth split into
 # instances (what a perfect person detector gives), and on real data the bundled person model.
@@ -84,6 +85,16 @@ BG_ADJACENT = Run("bgrestore[adjacent]", "bgrestore", "oracle", (("removal.frame
                   "the paper's adjacent frames for the epipolar vote")
 BG_NONE = _run("bgrestore[none]", "bgrestore", "none", "no masks (removes nothing)")
 
+# the object scenes (carried, pushed, still and crowding objects): what each step adds over masks
+STATIC_ORB_CONSISTENT = Run("static-orb[oracle,consistent]", "static-orb", "oracle", (("consistent_pose", True),),
+                            "masks only, pose on the PnP-RANSAC-consistent matches (ours)")
+WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("consistent_first", False),),
+                     "masks + geometric test + weights, first pose by ORB-SLAM2's optimisation")
+BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", "oracle", (("frontend.consistent_pose", True),),
+                    "paper C with the pose on the PnP-RANSAC-consistent matches (ours)")
+BG_ALL = _run("bgrestore[oracle:all]", "bgrestore", "oracle:all",
+              "every object instance voted on (paper C's Mask R-CNN classes), not people only")
+
 
 @dataclass(frozen=True)
 class RunSet:
@@ -101,13 +112,19 @@ class RunSet:
         return not self.real and (self.scenes is None or scene in self.scenes)
 
 
+# our object scenes: masks alone, with the consistent pose, paper B, paper C (person-only and all-class masks)
+OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FIRST, WEIGHTEDSTATIC, BGRESTORE,
+               BG_CONSISTENT, BG_ALL)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
-    RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC)),
+    RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),
+           scenes=TUM_SCENES),
     RunSet("paper B ablation", (STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, WS_DEGRADED_GEOMETRY, WS_DEGRADED_WEIGHTS,
                                 WS_DEGRADED, WS_NONE), scenes=("walking_xyz", "walking_rpy")),
     RunSet("paper C", (BGRESTORE,), scenes=WALKING),  # paper C's tables cover the walking scenes
     RunSet("paper C ablation", (BG_NO_RESTORE, BG_ADJACENT), scenes=("walking_xyz",)),
+    # our object scenes: papers B and C where people carry and push things, stand still, crowd
+    RunSet("object scenes", OBJECT_ROWS, scenes=OBJECT_SCENES),
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
                          STATIC_ORB_PERSON, WS_NONE, BG_NONE), real=True),

@@ -35,6 +35,8 @@ def test_runs_per_sequence_follow_the_run_sets():
         "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic"]
     xyz = E.runs_for("synthetic", "walking_xyz")
     assert len(xyz) == 14 and xyz[-1] is E.BG_ADJACENT and E.BGRESTORE in xyz
+    carry = E.runs_for("synthetic", "walking_carry")
+    assert carry == list(E.OBJECT_ROWS) and E.DEPTHCLUSTER not in carry
     real = E.runs_for("real")
     assert E.WEIGHTEDSTATIC.mask_source("real") == "person" and E.WEIGHTEDSTATIC.mask_source("synthetic") == "oracle"
     assert E.BG_NO_RESTORE not in real and E.STATIC_ORB_PERSON in real
@@ -146,3 +148,28 @@ def test_notebooks_set_up_in_one_call_and_define_no_package_helper():
         defined = set(re.findall(r"^\s*def (\w+)\(", code, re.M))
         assert not defined & helpers, (nb.name, defined & helpers)
         assert "os.chdir" not in code and "sys.path" not in code, nb.name
+
+
+def _record(sequence: str, run: E.Run, ate: float, scores=None) -> E.RunRecord:
+    s = ErrorStats(ate, ate, ate, 0.0, ate, ate, 10)
+    return E.RunRecord(sequence, run.label, run.method, run.mask_source("synthetic"), "x", 10,
+                       TrajectoryErrors(s, s, s, 10), scores=scores or {})
+
+
+def test_object_scenes_are_labelled_rows_of_papers_b_and_c_and_fill_their_own_table():
+    from dynslam_lite import tables
+
+    carry = "synthetic/walking_carry"
+    recs = [_record(carry, run, 0.01 * (k + 1)) for k, run in enumerate(E.OBJECT_ROWS)]
+    recs[E.OBJECT_ROWS.index(E.WEIGHTEDSTATIC)].scores = {"points/geometric": MaskScores.from_counts(8, 2, 2)}
+    recs.append(_record("synthetic/walking_xyz", E.STATIC_ORB, 0.5))
+    for make, measured in ((tables.paper_b_table1, E.WEIGHTEDSTATIC), (tables.paper_c_table1, E.BGRESTORE)):
+        header, rows, notes = make(recs)
+        ours = [r for r in rows if r[1] == carry]
+        assert len(ours) == 1 and ours[0][0].startswith("ours: walking_carry") and ours[0][3:5] == ["-", "-"]
+        ate = 0.01 * (E.OBJECT_ROWS.index(measured) + 1)
+        assert ours[0][6].startswith(f"{ate:.4f}")  # measured on the scene, no published cell
+    header, rows, _ = tables.paper_bc_objects(recs)
+    assert [r[2] for r in rows] == [run.label for run in E.OBJECT_ROWS]
+    ws = rows[E.OBJECT_ROWS.index(E.WEIGHTEDSTATIC)]
+    assert ws[5] == "0.80 / 0.80" and ws[6] == "-"

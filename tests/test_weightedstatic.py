@@ -34,7 +34,8 @@ def test_weighted_test_catches_motion_along_the_epipolar_line():
     uv_cur = _pix(np.vstack([X_cur, along, off]))
     z_ref = X_ref[[0, 1, 2, 0, 0], 2]
     z_cur = np.concatenate([X_cur[:, 2], [along[2], off[2]]])
-    test = weighted_geometric_test(CAM, R, t, uv_ref, z_ref, uv_cur, z_cur, GeometricConfig())
+    paper = GeometricConfig(along_line=False)
+    test = weighted_geometric_test(CAM, R, t, uv_ref, z_ref, uv_cur, z_cur, paper)
     F = fundamental_from_pose(CAM, R, t)
     d = epipolar_distance(F, uv_ref, uv_cur)
     assert np.all(d[:4] < 1e-6) and d[4] > 5  # plain epipolar test misses the point sliding along
@@ -42,8 +43,31 @@ def test_weighted_test_catches_motion_along_the_epipolar_line():
     assert test.cos[3] < 1e-9 and test.depth_change[3] > 0.2
     assert test.off_line.tolist() == [False, False, False, False, True]  # = the plain test
     # without any depth, the off-line point is still dynamic through the epipolar term alone
-    no_depth = weighted_geometric_test(CAM, R, t, uv_ref, np.zeros(5), uv_cur, np.zeros(5))
+    no_depth = weighted_geometric_test(CAM, R, t, uv_ref, np.zeros(5), uv_cur, np.zeros(5), paper)
     assert no_depth.dynamic.tolist() == [False, False, False, False, True]
+    assert GeometricConfig() == paper  # the method's default is eq. 4 as printed
+    ours = weighted_geometric_test(CAM, R, t, uv_ref, z_ref, uv_cur, z_cur, GeometricConfig(along_line=True))
+    assert ours.dynamic.tolist() == test.dynamic.tolist()
+    assert ours.angle[:3].max() < 1e-9 and ours.off_line[3:].all()  # sees the slide along the line
+
+
+def test_along_line_term_sees_motion_parallel_to_the_translation():
+    """A point moving 8 cm along the camera's translation stays in its epipolar plane and keeps
+    its depth within 5 %: eq. 4 passes it, the angle to the predicted point p' does not."""
+    T = se3_exp([0.10, 0.0, 0.02, 0.0, 0.0, 0.0])
+    R, t = T[:3, :3], T[:3, 3]
+    X_ref = np.array([[0.3, -0.2, 2.0], [-0.5, 0.1, 3.0]])
+    X_cur = X_ref @ R.T + t
+    moved = X_cur + 0.8 * t  # along the translation: inside the epipolar plane
+    uv_ref, uv_cur = _pix(X_ref[[0, 1, 0]]), _pix(np.vstack([X_cur, moved[:1]]))
+    z_ref, z_cur = X_ref[[0, 1, 0], 2], np.array([X_cur[0, 2], X_cur[1, 2], moved[0, 2]])
+    paper = weighted_geometric_test(CAM, R, t, uv_ref, z_ref, uv_cur, z_cur)
+    ours = weighted_geometric_test(CAM, R, t, uv_ref, z_ref, uv_cur, z_cur, GeometricConfig(along_line=True))
+    assert paper.cos[2] < 1e-9 and paper.depth_change[2] < 0.05  # in the plane, depth kept
+    assert paper.dynamic.tolist() == [False, False, False]
+    assert ours.dynamic.tolist() == [False, False, True]
+    assert ours.angle[2] == pytest.approx(np.linalg.norm(np.cross(moved[0] - 0.8 * t, moved[0]))
+                                          / np.linalg.norm(moved[0] - 0.8 * t) / np.linalg.norm(moved[0]), rel=1e-6)
 
 
 def _scene(rng, n=300, moving=0.25):

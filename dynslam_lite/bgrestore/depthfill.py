@@ -184,13 +184,41 @@ def fill_crop(gray: np.ndarray, hole: np.ndarray, known: np.ndarray, t0: int, t1
         seeds.append(seed)
         region = flood_region(gray, seed, td, allowed=src)
         src &= ~region  # the next seed comes from another region
-        while True:  # the hole pixels touching the region take its mean value, layer by layer
-            total = cv2.filter2D(out * region, -1, k8, borderType=cv2.BORDER_CONSTANT)
-            count = cv2.filter2D(region.astype(np.float32), -1, k8, borderType=cv2.BORDER_CONSTANT)
-            layer = todo & (count > 0)
-            if not layer.any():
-                break
-            out[layer] = total[layer] / count[layer]
-            todo &= ~layer
-            region |= layer
+        # the hole pixels touching the region take the mean of their region neighbours
+        total = cv2.filter2D(out * region, -1, k8, borderType=cv2.BORDER_CONSTANT)
+        count = cv2.filter2D(region.astype(np.float32), -1, k8, borderType=cv2.BORDER_CONSTANT)
+        layer = todo & (count > 0)
+        out[layer] = total[layer] / count[layer]
+        todo &= ~layer
+        _fill_layers(out, todo, layer)
     return out, hole & ~todo, seeds
+
+
+def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
+    """Continue the filling layer by layer, in place: the ``todo`` pixels touching ``layer`` take
+    the mean of their ``layer`` neighbours and become the next layer.
+
+    Only the last layer can touch the next one (a pixel next to an older layer would have joined
+    that layer's successor), so each step works on the front's pixels alone (flat indices into a
+    padded grid, one ``np.bincount`` per step) instead of filtering the whole crop.
+    """
+    H, W = out.shape
+    Wp = W + 2
+    open_ = np.zeros((H + 2) * Wp, bool)  # padded: the border is never open
+    open_.reshape(H + 2, Wp)[1:-1, 1:-1] = todo
+    values = np.zeros((H + 2) * Wp, np.float32)
+    values.reshape(H + 2, Wp)[1:-1, 1:-1] = out
+    shifts = np.array([dy * Wp + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
+    front = np.flatnonzero(np.pad(layer, 1).ravel())
+    while front.size:
+        target = (front[None, :] + shifts[:, None]).ravel()
+        src = np.tile(front, len(shifts))
+        keep = open_[target]
+        if not keep.any():
+            break
+        target, src = target[keep], src[keep]
+        front, slot = np.unique(target, return_inverse=True)
+        values[front] = (np.bincount(slot, values[src]) / np.bincount(slot)).astype(np.float32)
+        open_[front] = False
+    out[:] = values.reshape(H + 2, Wp)[1:-1, 1:-1]
+    todo[:] = open_.reshape(H + 2, Wp)[1:-1, 1:-1]

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..geometry import PinholeCamera, backproject, invert, normalize_pose, project, transform_points
 from .matching import match_descriptors, search_by_projection
-from .optimize import Observations, local_bundle_adjustment, optimize_pose
+from .optimize import Observations, PoseResult, local_bundle_adjustment, optimize_pose, residuals
 from .orb import Features, ORBConfig, extract
 
 
@@ -62,6 +62,8 @@ class FrontendConfig:
     ba_max_nfev : function evaluations of each of the two phases of a local BA
     cull_ratio, cull_min_visible : a point found in fewer than ``cull_ratio`` of the frames
         where it was visible (after ``cull_min_visible`` of them) is removed
+    consistent_pose : the pose step optimises on the matches PnP-RANSAC finds consistent
+        (:meth:`FeatureTracker.consistent_pose`; ours, off = ORB-SLAM2's pose optimisation)
     """
 
     orb: ORBConfig = field(default_factory=ORBConfig)
@@ -79,6 +81,7 @@ class FrontendConfig:
     ba_max_nfev: int = 5
     cull_ratio: float = 0.25
     cull_min_visible: int = 4
+    consistent_pose: bool = False
 
 
 class PointMap:
@@ -250,8 +253,38 @@ class FeatureTracker:
                  T_init: np.ndarray) -> Estimate:
         """Pose from the matches: ORB-SLAM2's pose-only optimisation (overridden by paper B)."""
         obs = self.observations(feats, kp_idx)
-        r = optimize_pose(self.camera, self.bf, T_init, self.map.P_w[map_idx], obs)
+        if self.config.consistent_pose:
+            r = self.consistent_pose(T_init, self.map.P_w[map_idx], obs)
+        else:
+            r = optimize_pose(self.camera, self.bf, T_init, self.map.P_w[map_idx], obs)
         return Estimate(r.T_c_w, r.inliers, np.ones(len(map_idx)), np.zeros(len(feats), bool))
+
+    def consistent_pose(self, T_init: np.ndarray, P_w: np.ndarray, obs: Observations,
+                        threshold_px: float = 3.0) -> PoseResult:
+        """Pose-only optimisation on the largest set of matches one rigid motion explains.
+
+        ``cv2.solvePnPRansac`` (AP3P minimal sets, ``threshold_px`` reprojection error) picks the
+        set; :func:`optimize_pose` on it from ``T_init`` gives a pose at which every match is
+        gated by its chi2, and :func:`optimize_pose` on the matches within the gate gives the
+        result (every match classified at it). A group of matches that move together (a
+        carried board) can pull the Huber rounds of ORB-SLAM2's pose optimisation; here it
+        never enters unless it agrees with the consistent set. Where the moving matches
+        outnumber the static ones the consistent set is theirs (masks must remove most of a
+        crowd first). Without enough RANSAC inliers it is :func:`optimize_pose` from ``T_init``.
+        """
+        n_min = self.config.min_inliers
+        if len(P_w) >= n_min:
+            ok, _, _, inl = cv2.solvePnPRansac(
+                P_w.astype(np.float64), obs.uvr[:, :2].astype(np.float64), self.camera.K, None,
+                iterationsCount=100, reprojectionError=threshold_px, confidence=0.999,
+                flags=cv2.SOLVEPNP_AP3P)
+            if ok and inl is not None and len(inl) >= n_min:
+                sel = inl.ravel()
+                T = optimize_pose(self.camera, self.bf, T_init, P_w[sel], obs[sel]).T_c_w
+                e, _ = residuals(self.camera, self.bf, T[:3, :3], T[:3, 3], P_w, obs)
+                agree = obs.info * np.sum(e**2, axis=1) < obs.chi2_gate
+                return optimize_pose(self.camera, self.bf, T, P_w, obs, weights=agree.astype(float))
+        return optimize_pose(self.camera, self.bf, T_init, P_w, obs)
 
     def observations(self, feats: Features, kp_idx: np.ndarray) -> Observations:
         info = feats.inv_sigma2(self.config.orb.scale_factor)[kp_idx]

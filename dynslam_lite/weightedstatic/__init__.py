@@ -6,6 +6,6 @@ from .weighted_ba import JointResult, initial_weights, joint_cost, joint_pose_an
 
 __all__ = [
     "GeometricConfig", "GeometricTest", "rays", "weighted_geometric_test", "WeightedStaticConfig",
-    "WeightedStaticMethod", "WeightedStaticTracker", "JointResult", "joint_cost",
+    "WeightedStaticMethod", "WeightedStaticTracker", "JointResult", "initial_weights", "joint_cost",
     "joint_pose_and_weights",
 ]
