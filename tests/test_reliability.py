@@ -128,11 +128,17 @@ def _session_alive(sid: int) -> list[int]:
     return alive
 
 
+def _as_from_a_terminal():
+    """Ctrl-C handled as a terminal's foreground command has it: a suite started as a background
+    job (``cmd &`` in a script) passes SIGINT down ignored, and Python then keeps ignoring it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _interrupt(cmd, sig, after, to_group, cwd=ROOT):
     """Start ``cmd`` in a session of its own and send ``sig`` ``after`` seconds, or (a string)
     once a line starting with it was printed; (rc, seconds to exit, stderr, live processes left)."""
     p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         start_new_session=True)
+                         start_new_session=True, preexec_fn=_as_from_a_terminal)
     try:
         if isinstance(after, str):
             deadline = time.monotonic() + 300
