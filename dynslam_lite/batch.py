@@ -2,8 +2,10 @@
 
 1. plan: the profile's synthetic scenes (``notebooks/reproduce.yaml``) and the real sequences
    given, each with its runs from :mod:`dynslam_lite.experiments`;
-2. run: scenes generated and runs tracked and scored in worker processes (:func:`worker_pool`),
-   each estimated trajectory scored as written (:func:`evaluate_run`);
+2. run: scenes generated and runs tracked and scored in worker processes (:func:`worker_pool`,
+   or a Dask distributed cluster with ``--scheduler``, :func:`dask_executor`), each estimated
+   trajectory scored as written (:func:`evaluate_run`); a plan with the estimated time first,
+   an ETA with every finished run (:class:`Estimate`);
 3. report: tables, trajectories and ``runs.json``, the notebooks executed with papermill
    (notebook 90 scores the trajectories again and writes the tables), provenance and the index,
    all in a temporary folder first: ``reports/`` changes only when everything succeeded.
@@ -25,6 +27,7 @@ from pathlib import Path
 
 from . import experiments, tables
 from .errors import BatchError, ConfigError, Interrupted
+from .download import ARCHIVES
 from .evaluation import evaluate
 from .experiments import Run, RunRecord
 from .io import atomic_write_text, format_trajectory, open_sequence, parse_trajectory
@@ -36,6 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOK_DIR = ROOT / "notebooks"
 REGISTRY = NOTEBOOK_DIR / "reproduce.yaml"
 DEFAULT_CACHE = Path("build") / "data"
+SCHEDULER_TIMEOUT = "20s"  # how long to wait for a Dask scheduler to answer
 
 
 @dataclass
@@ -51,6 +55,8 @@ class Options:
     reports: str = "reports"
     notebooks: bool = True
     fresh: bool = False  # run everything again instead of taking finished runs from the run cache
+    scheduler: str | None = None  # a Dask distributed scheduler address: runs and notebooks go there
+    data_root: str | None = None  # where a profile with 'papers_data' looks (default: the profile's folder)
 
 
 @dataclass(frozen=True)
@@ -94,13 +100,26 @@ def load_registry(path: Path = REGISTRY) -> tuple[dict, dict]:
     except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
         raise ConfigError(f"{path}: not a readable reproduction registry ({exc})") from exc
     for prof in profiles.values():
-        prof["scenes"] = tuple(SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"])
+        prof["scenes"] = tuple(SCENES) if prof["scenes"] == "all" else tuple(prof["scenes"] or ())
     for name, params in notebooks.items():
         if not (NOTEBOOK_DIR / f"{name}.ipynb").exists():
             raise ConfigError(f"{path}: notebook {name}.ipynb does not exist")
         if set(params) != set(profiles):
             raise ConfigError(f"{path}: notebook {name} needs parameters for every profile {sorted(profiles)}")
     return profiles, notebooks
+
+
+def papers_data(root: Path) -> tuple[list[str], list[str]]:
+    """The papers' sequences (those ``download`` knows) under ``root``: (folders present, one line
+    per missing sequence with the command that downloads it)."""
+    present, missing = [], []
+    for name, arc in ARCHIVES.items():
+        folder = root / arc.folder
+        if (folder / "rgb.txt").is_file():
+            present.append(str(folder))
+        else:
+            missing.append(f"{arc.folder}: python -m dynslam_lite download {name} --dest {root}")
+    return present, missing
 
 
 def plan(scene_paths: dict[str, str], data: list[str]) -> list[Job]:
@@ -148,32 +167,98 @@ def stop_children(grace_s: float = 3.0) -> None:
 
 
 @contextmanager
-def worker_pool(jobs: int):
-    """A process pool of ``jobs`` workers. With more than one, every worker (and every notebook
-    kernel started meanwhile) runs one BLAS and OpenCV thread: OpenBLAS's spinning threads had
-    doubled the batch on 2 cores. Spawned, not forked: a forked child inherits OpenCV's thread
-    pool in a broken state and hangs. Left by an exception (Ctrl-C), the workers are stopped at
-    once instead of finishing the queue."""
-    saved = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+def one_blas_thread(jobs: int):
+    """With more than one worker, every process started meanwhile (workers, notebook kernels)
+    runs one BLAS and one OpenCV thread: OpenBLAS's spinning threads had doubled the batch on 2
+    cores, and the notebooks (run two at a time after the pool) took 3-4x as long as the same
+    runs in it."""
+    saved = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                                            "OPENCV_FOR_THREADS_NUM")}
     if jobs > 1:
         for var in saved:
             os.environ.setdefault(var, "1")
-    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"),
-                               initializer=_worker_init, initargs=(jobs,))
     try:
-        yield pool
-    except BaseException:
-        stop_children()
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    else:
-        pool.shutdown(wait=True)
+        yield
     finally:
         for var, value in saved.items():
             if value is None:
                 os.environ.pop(var, None)
             else:
                 os.environ[var] = value
+
+
+@contextmanager
+def worker_pool(jobs: int):
+    """A process pool of ``jobs`` workers (one BLAS and OpenCV thread each when there are
+    several, :func:`one_blas_thread`). Spawned, not forked: a forked child inherits OpenCV's
+    thread pool in a broken state and hangs. Left by an exception (Ctrl-C), the workers are
+    stopped at once instead of finishing the queue."""
+    with one_blas_thread(jobs):
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"),
+                                   initializer=_worker_init, initargs=(jobs,))
+        try:
+            yield pool
+        except BaseException:
+            stop_children()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        else:
+            pool.shutdown(wait=True)
+
+
+@contextmanager
+def dask_executor(address: str):
+    """(executor, worker threads) on a Dask distributed cluster (``Client.get_executor``, a
+    ``concurrent.futures`` executor):
+    its workers import dynslam_lite and read the data and write the notebooks at the same paths,
+    so the cluster shares this file system (a Slurm/PBS cluster through dask-jobqueue, or a
+    ``LocalCluster``). Left by an exception (Ctrl-C), the futures are cancelled."""
+    try:
+        from distributed import Client
+    except ImportError as exc:
+        raise ConfigError(f"--scheduler needs dask distributed ({exc}); pip install -r environment.txt") from exc
+    try:
+        client = Client(address, timeout=SCHEDULER_TIMEOUT)
+    except (OSError, TimeoutError) as exc:
+        raise ConfigError(f"--scheduler {address}: no Dask scheduler answers ({exc})") from exc
+    pool = client.get_executor(pure=False)
+    try:
+        yield pool, max(sum(client.nthreads().values()), 1)
+    except BaseException:
+        pool.shutdown(wait=False)
+        raise
+    else:
+        pool.shutdown(wait=True)
+    finally:
+        client.close()
+
+
+@contextmanager
+def run_executor(opt: Options):
+    """Where the runs go: (executor, runs it takes at once), the local worker pool or the Dask
+    cluster at ``opt.scheduler`` (its worker threads)."""
+    if opt.scheduler:
+        with dask_executor(opt.scheduler) as (pool, workers):
+            yield pool, workers
+    else:
+        with worker_pool(opt.jobs) as pool:
+            yield pool, opt.jobs
+
+
+@contextmanager
+def notebook_executor(opt: Options):
+    """Where the notebooks go: threads here (each starts its kernel process, one BLAS thread
+    each), or the Dask cluster at ``opt.scheduler``."""
+    if opt.scheduler:
+        with dask_executor(opt.scheduler) as (pool, _):
+            yield pool
+        return
+    with one_blas_thread(opt.jobs):
+        threads = ThreadPoolExecutor(max_workers=opt.jobs)  # kernels are processes
+        try:
+            yield threads
+        finally:  # on Ctrl-C: kernels stopped, threads not waited for
+            threads.shutdown(wait=False, cancel_futures=True)
 
 
 def generate_scene(job: tuple) -> str:
@@ -313,10 +398,16 @@ def _reproduce(opt: Options) -> int:
     cache = Path(opt.cache)
     t0 = time.perf_counter()
     fingerprint = code_fingerprint(ROOT)
+    if prof.get("papers_data"):  # every paper sequence found, whole; the missing ones named
+        root = Path(opt.data_root or prof["papers_data"])
+        found, missing = papers_data(root)
+        _say(f"[papers] {len(found)} of the papers' {len(ARCHIVES)} sequences under {root}"
+             + "".join(f"\n[papers] missing {m}" for m in missing))
+        opt.data = list(dict.fromkeys([*opt.data, *found]))
     for d in opt.data:
         seq = open_sequence(d)  # validate real data before any long work, with a clear error
         _say(f"[data] {d}: {len(seq)} frames")
-    with worker_pool(opt.jobs) as pool:
+    with run_executor(opt) as (pool, workers):
         scenes = list(prof["scenes"])
         paths = dict(zip(scenes, pool.map(generate_scene, [(str(cache), s, frames, opt.seed) for s in scenes])))
         for scene, path in paths.items():
@@ -328,16 +419,19 @@ def _reproduce(opt: Options) -> int:
         outcomes: list[Done | Failure | None] = [None if opt.fresh else runs.get(k) for k in keys]
         todo = [i for i, o in enumerate(outcomes) if o is None]
         _say(f"[runs] {len(jobs)} runs: {len(jobs) - len(todo)} finished earlier (run cache {runs.root}; "
-             f"--fresh runs them again), {len(todo)} to run on {opt.jobs} worker(s)")
+             f"--fresh runs them again), {len(todo)} to run on {workers} worker(s)"
+             + (f" of the Dask cluster at {opt.scheduler}" if opt.scheduler else ""))
         for k, (job, o) in enumerate(((j, o) for j, o in zip(jobs, outcomes) if o is not None), 1):
             _say(f"[cached {k}] {job.sequence:32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
+        eta = Estimate(Path(opt.reports) / "trajectories" / "runs.json", [jobs[i] for i in todo], workers)
+        _say(eta.plan())
         futures = {pool.submit(evaluate_run, jobs[i]): i for i in todo}
         for k, fut in enumerate(as_completed(futures), 1):
             outcome = fut.result()
             outcomes[futures[fut]] = outcome
             if isinstance(outcome, Done):
                 runs.put(keys[futures[fut]], outcome)  # at once: an interrupted batch resumes here
-            _progress(k, len(todo), outcome)
+            _progress(k, len(todo), outcome, eta.done(jobs[futures[fut]]))
     failed = [o for o in outcomes if isinstance(o, Failure)]
     done = [o for o in outcomes if isinstance(o, Done)]
     records = [d.record for d in done]
@@ -362,17 +456,14 @@ def _reproduce(opt: Options) -> int:
                    for name, params in notebooks.items() if opt.notebooks]
         portable = {out: _relative(opt.reports), str(cache.resolve()): _relative(cache), f"{ROOT}{os.sep}": "",
                     str(writer.tmp): _relative(opt.reports)}  # papermill's metadata: the relative form
-        threads = ThreadPoolExecutor(max_workers=opt.jobs)  # kernels are processes
-        try:
-            for (name, secs, err), (_, _, path) in zip(threads.map(execute_notebook, nb_jobs), nb_jobs):
+        with notebook_executor(opt) as nb_pool:
+            for (name, secs, err), (_, _, path) in zip(nb_pool.map(execute_notebook, nb_jobs), nb_jobs):
                 _say(f"[notebook] {name}: {'FAILED ' + err if err else 'ok'} ({secs:.0f} s)")
                 nb_times[name] = secs
                 if err:
                     failed_nbs.append((name, err))
                 elif path.exists():
                     _portable(path, portable)
-        finally:  # on Ctrl-C: kernels stopped, threads not waited for
-            threads.shutdown(wait=False, cancel_futures=True)
         writer.write_text("provenance.json", _provenance(opt, prof, frames, command, fingerprint))
         writer.write_text("README.md", _index(opt, prof, frames, command))
         _summary(records, failed, nb_times, failed_nbs, t_nb - t_runs, time.perf_counter() - t0)
@@ -395,13 +486,61 @@ def _reproduce(opt: Options) -> int:
     return 0
 
 
-def _progress(k: int, n: int, outcome) -> None:
+class Estimate:
+    """The plan's time estimate and the progress lines' ETA: each run's frames times its method's
+    ms/frame in the last reproduction's ``runs.json`` (or :attr:`DEFAULT_MS`), over the workers;
+    as runs finish, the estimate is scaled by measured time / estimated time so far."""
+
+    DEFAULT_MS = 300.0  # ms/frame of a method never measured here
+
+    def __init__(self, runs_json: Path, jobs: list[Job], workers: int):
+        measured: dict[str, list[float]] = {}
+        try:
+            for r in json.loads(runs_json.read_text(encoding="utf-8")):
+                measured.setdefault(r["method"], []).append(float(r["ms_per_frame"]))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass  # no earlier reproduction: the default rate
+        self.ms = {m: sum(v) / len(v) for m, v in measured.items() if v}
+        lengths = {path: self._length(path) for path in {job.path for job in jobs}}
+        self.frames = {job: lengths[job.path] for job in jobs}
+        self.workers = max(workers, 1)
+        self.left = sum(self._seconds(job) for job in jobs)
+        self.estimated_done = 0.0
+        self.t0 = time.perf_counter()
+
+    @staticmethod
+    def _length(path: str) -> int:
+        try:
+            return len(open_sequence(path))
+        except Exception:  # noqa: BLE001 - unreadable data fails in its run, with its error
+            return 0
+
+    def _seconds(self, job: Job) -> float:
+        return self.frames.get(job, 0) * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
+
+    def plan(self) -> str:
+        frames = sum(self.frames.values())
+        return (f"[plan] {len(self.frames)} runs, {frames} frames to track; about "
+                f"{self.left / self.workers / 60:.0f} min on {self.workers} worker(s) (ms/frame per method "
+                f"from the last reproduction's runs.json, {self.DEFAULT_MS:.0f} ms where none)")
+
+    def done(self, job: Job) -> str:
+        """' ETA ...' after ``job`` finished."""
+        est = self._seconds(job)
+        self.left -= est
+        self.estimated_done += est
+        elapsed = time.perf_counter() - self.t0
+        scale = elapsed * self.workers / self.estimated_done if self.estimated_done > 0 else 1.0
+        return f", ETA {max(self.left, 0.0) * scale / self.workers / 60:.1f} min"
+
+
+def _progress(k: int, n: int, outcome, eta: str = "") -> None:
     if isinstance(outcome, Failure):
-        _say(f"[run {k}/{n}] {outcome.job.sequence:32s} {outcome.job.run.label:42s} FAILED {outcome.error}")
+        _say(f"[run {k}/{n}] {outcome.job.sequence:32s} {outcome.job.run.label:42s} FAILED {outcome.error}{eta}")
         return
     rec = outcome.record
     _say(f"[run {k}/{n}] {rec.sequence:32s} {rec.label:42s} ATE {rec.errors.ate.rmse:.4f} m "
-         f"RPE {fmt(rec.errors.rpe_trans.rmse)} m/s ({rec.frames} frames, {outcome.seconds:.0f} s)")
+         f"RPE {fmt(rec.errors.rpe_trans.rmse)} m/s ({rec.frames} frames, {outcome.seconds:.0f} s{eta})")
 
 
 def _command(opt: Options) -> str:

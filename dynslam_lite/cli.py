@@ -129,7 +129,7 @@ def cmd_bench(a) -> int:
 def cmd_reproduce(a) -> int:
     """Batch reproduction on the embedded synthetic default (plus --data sequences)."""
     return batch.reproduce(batch.Options(a.profile, a.frames, a.data or [], a.seed, a.jobs, a.cache,
-                                         a.reports, not a.no_notebooks, a.fresh))
+                                         a.reports, not a.no_notebooks, a.fresh, a.scheduler, a.data_root))
 
 
 def cmd_download(a) -> int:
@@ -191,7 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=cmd_bench)
 
     rp = sub.add_parser("reproduce", help="batch reproduction into reports/")
-    rp.add_argument("--profile", default="full", help=f"a profile of {batch.REGISTRY.name}: tiny, quick or full")
+    rp.add_argument("--profile", default="full",
+                    help=f"a profile of {batch.REGISTRY.name}: tiny, quick, full, or papers (full plus every "
+                         "paper sequence found under --data-root, whole)")
+    rp.add_argument("--data-root", default=None, metavar="DIR",
+                    help="where --profile papers looks for the papers' sequences (default build/datasets, "
+                         "where `download` puts them)")
     rp.add_argument("--frames", type=int, default=None, help="override the profile's frame count")
     rp.add_argument("--data", action="append", help="real TUM/Bonn sequence folder (repeatable)")
     rp.add_argument("--seed", type=int, default=0)
@@ -201,6 +206,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--fresh", action="store_true",
                     help="run every run again (default: take the runs finished earlier with the same code, "
                          "parameters and data from the run cache beside --cache, e.g. after an interruption)")
+    rp.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="a Dask distributed scheduler (e.g. tcp://host:8786): the runs and notebooks go to "
+                         "its workers, which must see this file system (README: on a cluster)")
     rp.add_argument("--no-notebooks", action="store_true",
                     help="tables only: skip the notebooks (figures and executed notebooks in "
                          "reports/ stay as they are)")

@@ -88,7 +88,7 @@ BG_NONE = _run("bgrestore[none]", "bgrestore", "none", "no masks (removes nothin
 # the object scenes (carried, pushed, still and crowding objects): what each step adds over masks
 STATIC_ORB_CONSISTENT = Run("static-orb[oracle,consistent]", "static-orb", "oracle", (("consistent_pose", True),),
                             "masks only, pose on the PnP-RANSAC-consistent matches (ours)")
-WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("consistent_first", False),),
+WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("frontend.consistent_pose", False),),
                      "masks + geometric test + weights, first pose by ORB-SLAM2's optimisation")
 BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", "oracle", (("frontend.consistent_pose", True),),
                     "paper C with the pose on the PnP-RANSAC-consistent matches (ours)")

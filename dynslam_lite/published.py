@@ -40,6 +40,11 @@ SYNTHETIC_ANALOGUE = {
     "fr3/walking_halfsphere": "walking_halfsphere",
 }
 
+# TUM sequence -> the folder its archive unpacks to (what `download` writes): a real sequence in a
+# folder of that name fills the papers' own rows of the tables
+TUM_FOLDER = {name: f"rgbd_dataset_freiburg{name[2]}_{name.split('/', 1)[1]}" for name in SYNTHETIC_ANALOGUE}
+TUM_FOLDER["fr2/desk_person"] = "rgbd_dataset_freiburg2_desk_with_person"
+
 # Paper B, Table 1 (ATE, m) and Table 2 (RPE, m): (RMSE, median, S.D.) for ORB-SLAM2 and paper B.
 # s_static median of paper B is printed "0.057" (an evident 0.0057); kept as printed.
 B_SEQUENCES = {"w_half": "fr3/walking_halfsphere", "w_rpy": "fr3/walking_rpy",

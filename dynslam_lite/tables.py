@@ -21,8 +21,30 @@ def _index(results: list[RunRecord]) -> Index:
     return {(r.sequence, r.label): r for r in results}
 
 
-def _real(results: list[RunRecord]) -> list[str]:
-    return sorted({r.sequence for r in results if r.is_real})
+def _real(results: list[RunRecord], tums=()) -> list[str]:
+    """Real sequences measured, except those filling the paper rows of the TUM names ``tums``
+    (see :func:`_paper_rows`): the rows below a paper's own."""
+    placed = {_tum_real(results, t) for t in tums}
+    return sorted({r.sequence for r in results if r.is_real} - placed)
+
+
+def _tum_real(results: list[RunRecord], tum: str) -> str | None:
+    """'real/<folder>' when the TUM sequence ``tum`` ('fr3/walking_xyz') itself was measured (a
+    folder named as TUM's archive unpacks, e.g. from ``download``), else None."""
+    seq = f"real/{P.TUM_FOLDER[tum]}"
+    return seq if any(r.sequence == seq for r in results) else None
+
+
+def _paper_rows(results: list[RunRecord], row: str, tum: str) -> list[tuple[str, str | None, bool]]:
+    """Where paper row ``row`` (TUM sequence ``tum``) is measured: (first cell, sequence, with the
+    published cells). The TUM sequence itself fills the paper's own row when it was measured, and
+    the synthetic analogue follows as its own row; without it the analogue stands in the row."""
+    scene = P.SYNTHETIC_ANALOGUE.get(tum)
+    synthetic = f"synthetic/{scene}" if scene else None
+    real = _tum_real(results, tum)
+    if real is None:
+        return [(row, synthetic, True)]
+    return [(row, real, True)] + ([(f"synthetic analogue of {row}", synthetic, False)] if synthetic else [])
 
 
 def _labels(*runs: E.Run) -> tuple[str, ...]:
@@ -85,20 +107,20 @@ def paper_a_table1(results: list[RunRecord]) -> Table:
               + [f"{m} (measured) deg/s" for m in ms])
     rows = []
     for name, (trans, rot) in P.A_TABLE1.items():
-        scene = P.SYNTHETIC_ANALOGUE.get(name)
-        seq = f"synthetic/{scene}" if scene else None
-        rows.append(
-            [name, seq or "- (no analogue)", _frames(idx, seq, ms) if seq else "-"]
-            + list(trans) + [_get(idx, seq, m, "rpe_trans", "rmse") for m in ms]
-            + list(rot) + [_get(idx, seq, m, "rpe_rot_deg", "rmse") for m in ms]
-        )
-    for seq in _real(results):
+        for first, seq, pub in _paper_rows(results, name, name):
+            rows.append(
+                [first, seq or "- (no analogue)", _frames(idx, seq, ms) if seq else "-"]
+                + (list(trans) if pub else ["-"] * 4) + [_get(idx, seq, m, "rpe_trans", "rmse") for m in ms]
+                + (list(rot) if pub else ["-"] * 4) + [_get(idx, seq, m, "rpe_rot_deg", "rmse") for m in ms]
+            )
+    for seq in _real(results, P.A_TABLE1):
         rows.append(_real_head(idx, seq, ms)
                     + ["-"] * 4 + [_get(idx, seq, m, "rpe_trans", "rmse") for m in ms]
                     + ["-"] * 4 + [_get(idx, seq, m, "rpe_rot_deg", "rmse") for m in ms])
     notes = ("Published columns: the numbers printed in paper A (TUM sequences, full length). "
-             "Measured columns: this project's code on the data in 'measured on' (synthetic = the "
-             "embedded generator's analogue of the TUM sequence, not the TUM sequence itself), "
+             "Measured columns: this project's code on the data in 'measured on' (real = the TUM "
+             "sequence itself, the paper's row; synthetic = the embedded generator's analogue of "
+             "it, not the TUM sequence), "
              "RPE over 1-s pairs as TUM's evaluate_rpe.py, RMSE. static-dense plays the part of "
              "DVO (same dense photometric + depth model, no dynamic handling). '-' = not measured "
              "(no analogue, or the clip is shorter than 1 s).")
@@ -114,11 +136,11 @@ def paper_a_table2(results: list[RunRecord]) -> Table:
               + [f"{m} (measured) max / min / RMSE" for m in ms])
     rows = []
     for name, pub in P.A_TABLE2.items():
-        seq = f"synthetic/{P.SYNTHETIC_ANALOGUE[name]}"
-        rows.append([name, seq, _frames(idx, seq, ms)]
-                    + [" / ".join(f"{v:.4f}" for v in p) for p in pub]
-                    + [_triple(idx, seq, m) for m in ms])
-    for seq in _real(results):
+        for first, seq, with_pub in _paper_rows(results, name, name):
+            rows.append([first, seq, _frames(idx, seq, ms)]
+                        + [" / ".join(f"{v:.4f}" for v in p) if with_pub else "-" for p in pub]
+                        + [_triple(idx, seq, m) for m in ms])
+    for seq in _real(results, P.A_TABLE2):
         rows.append(_real_head(idx, seq, ms) + ["-"] * 3
                     + [_triple(idx, seq, m) for m in ms])
     notes = ("ATE after SE(3) alignment (evo, 0.02 s association), metres. Published: paper A's "
@@ -194,9 +216,6 @@ def _stats3(idx, seq, method, metric) -> str:
     return _stats(idx, seq, method, metric, ("rmse", "median", "std"))
 
 
-def _b_seq(name: str) -> str:
-    """Where paper B's sequence ``name`` (w_xyz, ...) is measured: its synthetic analogue."""
-    return f"synthetic/{P.SYNTHETIC_ANALOGUE[P.B_SEQUENCES[name]]}"
 
 
 def _improvement(idx, seq, metric, method: str = WS) -> str:
@@ -213,14 +232,15 @@ def _paper_b_rpe_ate(results, table, metric, unit_note) -> Table:
               f"{WS} (measured) RMSE / median / S.D.", "RMSE reduction % (measured)"]
     rows = []
     for name, (orb, paper) in table.items():
-        seq = _b_seq(name)
-        rows.append([name, seq, _frames(idx, seq, ms), " / ".join(map(str, orb)),
-                     " / ".join(map(str, paper)), _stats3(idx, seq, ORB, metric),
-                     _stats3(idx, seq, WS, metric), _improvement(idx, seq, metric)])
+        for first, seq, pub in _paper_rows(results, name, P.B_SEQUENCES[name]):
+            rows.append([first, seq, _frames(idx, seq, ms)]
+                        + ([" / ".join(map(str, orb)), " / ".join(map(str, paper))] if pub else ["-", "-"])
+                        + [_stats3(idx, seq, ORB, metric), _stats3(idx, seq, WS, metric),
+                           _improvement(idx, seq, metric)])
     for seq in _ours(results):
         rows.append(_ours_head(idx, seq, ms) + ["-", "-"]
                     + [_stats3(idx, seq, m, metric) for m in ms] + [_improvement(idx, seq, metric)])
-    for seq in _real(results):
+    for seq in _real(results, [P.B_SEQUENCES[n] for n in table]):
         rows.append(_real_head(idx, seq, ms) + ["-", "-"]
                     + [_stats3(idx, seq, m, metric) for m in ms] + [_improvement(idx, seq, metric)])
     notes = (f"{unit_note} Published: paper B's table as printed (TUM fr3 sequences). Measured: "
@@ -247,9 +267,10 @@ def paper_b_table2(results: list[RunRecord]) -> Table:
                             "does not state its RPE interval).")
 
 
-def _against_others(results, published: dict, others: tuple, measured: tuple, seq_of, metric: str,
+def _against_others(results, published: dict, others: tuple, measured: tuple, tum_of: dict, metric: str,
                     sd: str, notes: str) -> Table:
-    """Published (RMSE, SD) of other systems beside measured RMSE / SD; then the real-data rows."""
+    """Published (RMSE, SD) of other systems beside measured RMSE / SD; then the real-data rows.
+    ``tum_of``: the TUM sequence of each of the paper's row names."""
     idx = _index(results)
     header = (["sequence", "measured on", "frames"]
               + [f"{m} (published) RMSE / {sd}" for m in others]
@@ -258,16 +279,18 @@ def _against_others(results, published: dict, others: tuple, measured: tuple, se
     def pair(seq, m):
         return _stats(idx, seq, m, metric, ("rmse", "std"))
 
-    rows = [[name, seq_of(name), _frames(idx, seq_of(name), measured)] + [f"{a} / {b}" for a, b in pubs]
-            + [pair(seq_of(name), m) for m in measured] for name, pubs in published.items()]
+    rows = [[first, seq, _frames(idx, seq, measured)]
+            + ([f"{a} / {b}" for a, b in pubs] if pub else ["-"] * len(others))
+            + [pair(seq, m) for m in measured]
+            for name, pubs in published.items() for first, seq, pub in _paper_rows(results, name, tum_of[name])]
     rows += [_real_head(idx, seq, measured) + ["-"] * len(others) + [pair(seq, m) for m in measured]
-             for seq in _real(results)]
+             for seq in _real(results, [tum_of[n] for n in published])]
     return header, rows, notes
 
 
 def paper_b_table3(results: list[RunRecord]) -> Table:
     """Paper B, Table 3: ATE RMSE / S.D. of other systems (published) and ours (measured)."""
-    return _against_others(results, P.B_TABLE3, P.B_TABLE3_METHODS, PAPER_B_MEASURED, _b_seq, "ate",
+    return _against_others(results, P.B_TABLE3, P.B_TABLE3_METHODS, PAPER_B_MEASURED, P.B_SEQUENCES, "ate",
                            "S.D.", "ATE (m) after SE(3) alignment. Published: paper B's Table 3. "
                            "Measured: this project on the data in 'measured on'; the other systems "
                            "are not re-run here.")
@@ -317,6 +340,11 @@ def paper_b_ablation(results: list[RunRecord]) -> Table:
     return header, rows, notes
 
 
+def _defined_pr(c) -> tuple[float, float] | None:
+    """(precision, recall) of a score, None where nothing truly moving was scored (both undefined)."""
+    return (c.precision, c.recall) if c and c.tp + c.fn else None
+
+
 def paper_b_points(results: list[RunRecord]) -> Table:
     """Precision / recall of the dynamic-point classification against ground truth."""
     header = ["sequence", "run", "frames", "matches", "dynamic matches (truth)",
@@ -329,7 +357,7 @@ def paper_b_points(results: list[RunRecord]) -> Table:
             continue
         n, dyn = r.scored_points, g.tp + g.fn
         alarm = (lambda c: f"{c.fp} ({100.0 * c.fp / max(n - dyn, 1):.1f} %)")
-        pr = (lambda c: [c.precision, c.recall] if c and dyn else ["-", "-"])  # no truth: no P/R
+        pr = (lambda c: list(_defined_pr(c) or ("-", "-")))
         rows.append([r.sequence, r.label, r.frames, n, dyn, *pr(g), alarm(g), *pr(w),
                      alarm(w) if w else "-"])
     notes = ("Over the matched semantic-static points of every frame: a point is truly dynamic when "
@@ -347,10 +375,6 @@ C_MASKS = ("bgrestore uses the ground-truth instance masks ('oracle') on synthet
            "real data.")
 
 
-def _c_seq(name: str) -> str:
-    return f"synthetic/{P.SYNTHETIC_ANALOGUE[P.C_ANALOGUE[name]]}"
-
-
 def paper_c_table1(results: list[RunRecord]) -> Table:
     """Paper C, Table 1: ATE (m) RMSE / Mean / SD of ORB-SLAM2 and BR-SLAM, and the reduction."""
     idx = _index(results)
@@ -365,14 +389,15 @@ def paper_c_table1(results: list[RunRecord]) -> Table:
     def gain(seq):
         return _improvement(idx, seq, "ate", BG)
 
-    rows = [[name, _c_seq(name), _frames(idx, _c_seq(name), ms), " / ".join(map(str, orb)),
-             " / ".join(map(str, paper)), cell(_c_seq(name), ORB),
-             cell(_c_seq(name), BG), gain(_c_seq(name))]
-            for name, (orb, paper) in P.C_TABLE1.items()]
+    rows = [[first, seq, _frames(idx, seq, ms)]
+            + ([" / ".join(map(str, orb)), " / ".join(map(str, paper))] if pub else ["-", "-"])
+            + [cell(seq, ORB), cell(seq, BG), gain(seq)]
+            for name, (orb, paper) in P.C_TABLE1.items()
+            for first, seq, pub in _paper_rows(results, name, P.C_ANALOGUE[name])]
     rows += [_ours_head(idx, seq, ms) + ["-", "-", cell(seq, ORB), cell(seq, BG), gain(seq)]
              for seq in _ours(results)]
     rows += [_real_head(idx, seq, ms) + ["-", "-", cell(seq, ORB), cell(seq, BG), gain(seq)]
-             for seq in _real(results)]
+             for seq in _real(results, P.C_ANALOGUE.values())]
     notes = ("ATE after SE(3) alignment (evo), metres. Published: paper C's Table 1 (TUM fr3, 5-run "
              "means). Measured: static-orb (this project's ORB-SLAM2-like frontend) in place of "
              "ORB-SLAM2, and bgrestore, one run each on the data in 'measured on'. " + C_MASKS
@@ -381,7 +406,7 @@ def paper_c_table1(results: list[RunRecord]) -> Table:
 
 
 def _paper_c_other(results, table, metric, unit_note) -> Table:
-    return _against_others(results, table, P.C_OTHER_METHODS, PAPER_C_MEASURED, _c_seq, metric, "SD",
+    return _against_others(results, table, P.C_OTHER_METHODS, PAPER_C_MEASURED, P.C_ANALOGUE, metric, "SD",
                            f"{unit_note} Published: paper C; the other systems are not re-run here. "
                            + C_MASKS)
 
@@ -439,9 +464,8 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
         c = r.score(key) if r else None
         if c is None:
             return "-"
-        if c.tp + c.fn == 0:  # no moving point was matched: precision and recall undefined
-            return f"- (no moving match; {c.fp} false alarms)"
-        return f"{fmt(c.precision, 2)} / {fmt(c.recall, 2)}"
+        p = _defined_pr(c)
+        return f"{fmt(p[0], 2)} / {fmt(p[1], 2)}" if p else f"- (no moving match; {c.fp} false alarms)"
 
     rows = []
     for seq in _ours(results):

@@ -91,7 +91,7 @@ def test_local_bundle_adjustment_removes_perturbation():
     P0 = P + rng.normal(0, 0.02, P.shape)
     fixed = np.array([True, False, False, False])
     T, P1, chi2 = local_bundle_adjustment(CAM, BF, T0, fixed, P0, np.array(kf), np.array(pt), obs,
-                                          max_nfev=30)
+                                          iterations=15)
     for k in (1, 2, 3):
         assert np.linalg.norm(se3_log(T[k] @ invert(T_true[k]))) < 1e-4
     assert np.abs(P1 - P).max() < 1e-3 and np.median(chi2) < 1e-4

@@ -20,7 +20,7 @@ paper's F -> E -> (R, t) route beside it.
 
 Vectorised: the projection of every keyframe pixel is one matrix product, the splat is four
 ``np.bincount`` calls per channel; a coarse pass on every 8th pixel first finds the part of each
-keyframe that can land in the hole, so only that part is projected at full resolution.
+keyframe's blocks that can land in the hole, so only those are projected at full resolution.
 """
 from __future__ import annotations
 
@@ -67,14 +67,15 @@ class Restoration:
     filled: np.ndarray
 
 
-def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, rows: slice, cols: slice,
-             step: int):
-    """Keyframe pixels of a window (every ``step``-th) moved into the current camera."""
-    z = kf.depth[rows, cols][::step, ::step]
-    v, u = np.nonzero((z > 0) & ~kf.invalid[rows, cols][::step, ::step])
+def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, use: np.ndarray | None = None,
+             step: int = 1):
+    """Keyframe pixels with depth, outside ``kf.invalid`` (and inside ``use`` where given), every
+    ``step``-th row and column, moved into the current camera: (x, y, depth there, u, v)."""
+    z = kf.depth[::step, ::step]
+    ok = (z > 0) & ~kf.invalid[::step, ::step]
+    v, u = np.nonzero(ok if use is None else ok & use)
     z = z[v, u].astype(np.float32)
-    v = (v * step + rows.start).astype(np.int64)
-    u = (u * step + cols.start).astype(np.int64)
+    v, u = v * step, u * step
     P = backproject(camera, u.astype(np.float32), v.astype(np.float32), z)
     Pc = P @ T_cur_kf[:3, :3].T.astype(np.float32) + T_cur_kf[:3, 3].astype(np.float32)
     front = Pc[:, 2] > 0.05
@@ -84,16 +85,22 @@ def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, row
     return x, y, Pc[:, 2], u, v
 
 
-def _window(camera, kf, T_cur_kf, hole_box, shape, coarse: int = 8, margin: int = 12):
-    """Rows/cols of the keyframe whose pixels can land in the hole's box (coarse pass)."""
-    H, W = shape
-    x, y, _, u, v = _project(camera, kf, T_cur_kf, slice(0, H), slice(0, W), coarse)
-    y0, y1, x0, x1 = hole_box
-    hit = (x >= x0 - 1) & (x <= x1 + 1) & (y >= y0 - 1) & (y <= y1 + 1)
+def _candidates(camera, kf, T_cur_kf, reach: np.ndarray, coarse: int = 8) -> np.ndarray | None:
+    """(H, W) bool, the keyframe pixels that can land in the hole: a coarse pass moves every
+    ``coarse``-th pixel, a block of ``coarse`` x ``coarse`` pixels is kept when its sample lands
+    in ``reach`` (the hole widened by a margin), and so are its 8 neighbour blocks. None: no
+    sample lands there."""
+    H, W = reach.shape
+    x, y, _, u, v = _project(camera, kf, T_cur_kf, None, coarse)
+    xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
+    hit = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
+    hit[hit] = reach[yi[hit], xi[hit]]
     if not hit.any():
         return None
-    return (slice(max(int(v[hit].min()) - margin, 0), min(int(v[hit].max()) + margin + 1, H)),
-            slice(max(int(u[hit].min()) - margin, 0), min(int(u[hit].max()) + margin + 1, W)))
+    blocks = np.zeros((-(-H // coarse), -(-W // coarse)), np.uint8)
+    blocks[v[hit] // coarse, u[hit] // coarse] = 1
+    blocks = cv2.dilate(blocks, np.ones((3, 3), np.uint8))
+    return np.repeat(np.repeat(blocks, coarse, 0), coarse, 1)[:H, :W].astype(bool)
 
 
 def splat(x: np.ndarray, y: np.ndarray, values: np.ndarray, hole: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -101,32 +108,31 @@ def splat(x: np.ndarray, y: np.ndarray, values: np.ndarray, hole: np.ndarray) ->
 
     ``values`` (N, C). Each point spreads over the 4 pixel centres around (x, y) with the
     unit-square overlap areas; only centres inside ``hole`` receive anything. Points must lie
-    in [-1, W) x [-1, H).
+    in [-1, W) x [-1, H). The sums run on a grid padded by one pixel (centres just outside the
+    image take what falls there) with one ``np.bincount`` per channel.
     """
     H, W = hole.shape
-    C = values.shape[1]
-    flat = np.flatnonzero(hole)
-    slot = np.full((H + 2) * (W + 2), -1, np.int64)  # padded grid: hole pixel -> compact index
-    slot[(flat // W + 1) * (W + 2) + flat % W + 1] = np.arange(flat.size)
+    W2 = W + 2
     x0, y0 = np.floor(x), np.floor(y)
     fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
-    base = (y0.astype(np.int64) + 1) * (W + 2) + x0.astype(np.int64) + 1
-    k = slot[np.stack([base, base + 1, base + W + 2, base + W + 3])]  # (4, N)
-    w = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
-    hit = k >= 0
-    k, w = k[hit], w[hit]
-    src = np.broadcast_to(np.arange(len(x)), hit.shape)[hit]
-    wsum = np.zeros(H * W)
-    acc = np.zeros((H * W, C))
-    wsum[flat] = np.bincount(k, w, flat.size)
-    for c in range(C):
-        acc[flat, c] = np.bincount(k, w * values[src, c], flat.size)
-    return acc.reshape(H, W, C), wsum.reshape(H, W)
+    base = (y0.astype(np.int64) + 1) * W2 + x0.astype(np.int64) + 1
+    k = np.concatenate([base, base + 1, base + W2, base + W2 + 1])
+    w = np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
+    inside = np.zeros((H + 2, W2), bool)
+    inside[1:-1, 1:-1] = hole
+
+    def grid(weights):
+        return np.bincount(k, weights, (H + 2) * W2).reshape(H + 2, W2)[1:-1, 1:-1] * hole
+
+    wsum = grid(w)
+    acc = np.stack([grid(w * np.tile(values[:, c], 4)) for c in range(values.shape[1])], axis=-1)
+    return acc, wsum
 
 
 def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray,
                            T_w_cur: np.ndarray, keyframes: list[KeyframeImage],
-                           min_weight: float = 0.25, depth_tolerance: float = 0.05) -> Restoration:
+                           min_weight: float = 0.25, depth_tolerance: float = 0.05,
+                           reach_px: int = 16) -> Restoration:
     """Fill ``hole`` of the current (rgb, depth) from ``keyframes`` (the paper uses the latest 20).
 
     Pixels outside the hole are returned unchanged; hole pixels reached by less than
@@ -134,6 +140,8 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
     pixels of several surfaces land on one pixel, only those within ``depth_tolerance``
     (relative) of the nearest are used: the paper has no visibility test, without one a
     foreground edge seen from another keyframe would bleed into the background behind it.
+    Only the keyframe pixels near those whose coarse samples land within ``reach_px`` of the
+    hole are moved at full resolution (:func:`_candidates`).
     """
     checks.rgb8("rgb", rgb)
     checks.depth("depth", depth, rgb.shape[:2])
@@ -142,16 +150,16 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
     H, W = hole.shape
     pts = []
     if hole.any():
-        ys, xs = np.nonzero(hole)
-        box = (ys.min(), ys.max(), xs.min(), xs.max())
         T_cur_w = np.linalg.inv(T_w_cur)
-        near_hole = cv2.dilate(hole.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        hole8 = hole.astype(np.uint8)
+        near_hole = cv2.dilate(hole8, np.ones((3, 3), np.uint8)) > 0
+        reach = cv2.dilate(hole8, np.ones((2 * reach_px + 1, 2 * reach_px + 1), np.uint8)) > 0
         for kf in keyframes:
             T = T_cur_w @ kf.T_w_c
-            win = _window(camera, kf, T, box, (H, W))
-            if win is None:
+            use = _candidates(camera, kf, T, reach)
+            if use is None:
                 continue
-            x, y, zc, u, v = _project(camera, kf, T, win[0], win[1], 1)
+            x, y, zc, u, v = _project(camera, kf, T, use)
             xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
             land = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
             land[land] = near_hole[yi[land], xi[land]]

@@ -172,8 +172,9 @@ def estimate_pair(
         removed = base.copy()  # prior and pre-removal took nearly everything: do not trust them
     if static_fraction(removed) < cfg.min_static_fraction:
         removed[:] = False
+    shared: dict = {}  # pyramids of the pair, built by the first alignment
     with stage("align_0"):
-        r = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_init, ~removed, cfg.dense)
+        r = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_init, ~removed, cfg.dense, shared)
     its: list[Iteration] = []
     if not r.ok:
         its.append(Iteration(r.T_cur_ref, removed, None, float("nan"), 0.0, False, r.reason))
@@ -197,7 +198,7 @@ def estimate_pair(
             its[-1].reason = "update rejected: too few static pixels left"
             break
         with stage(f"update_{k + 1}"):
-            rr = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, ~new_removed, refine)
+            rr = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, ~new_removed, refine, shared)
         if not rr.ok:
             its[-1].reason = f"update rejected: {rr.reason}"
             break

@@ -59,7 +59,8 @@ class FrontendConfig:
     local_map_keyframes : the local map holds the points of this many latest keyframes
     ba_window : keyframes optimised by local bundle adjustment (older observers held fixed);
         0 = no local BA
-    ba_max_nfev : function evaluations of each of the two phases of a local BA
+    ba_iterations : Levenberg-Marquardt steps of the robust phase of a local BA (the inlier phase runs
+        twice as many; ORB-SLAM2: 5 and 10)
     cull_ratio, cull_min_visible : a point found in fewer than ``cull_ratio`` of the frames
         where it was visible (after ``cull_min_visible`` of them) is removed
     consistent_pose : the pose step optimises on the matches PnP-RANSAC finds consistent
@@ -78,7 +79,7 @@ class FrontendConfig:
     min_new_points: int = 100
     local_map_keyframes: int = 8
     ba_window: int = 5
-    ba_max_nfev: int = 5
+    ba_iterations: int = 5
     cull_ratio: float = 0.25
     cull_min_visible: int = 4
     consistent_pose: bool = False
@@ -253,11 +254,15 @@ class FeatureTracker:
                  T_init: np.ndarray) -> Estimate:
         """Pose from the matches: ORB-SLAM2's pose-only optimisation (overridden by paper B)."""
         obs = self.observations(feats, kp_idx)
-        if self.config.consistent_pose:
-            r = self.consistent_pose(T_init, self.map.P_w[map_idx], obs)
-        else:
-            r = optimize_pose(self.camera, self.bf, T_init, self.map.P_w[map_idx], obs)
+        r = self.first_pose(T_init, self.map.P_w[map_idx], obs)
         return Estimate(r.T_c_w, r.inliers, np.ones(len(map_idx)), np.zeros(len(feats), bool))
+
+    def first_pose(self, T_init: np.ndarray, P_w: np.ndarray, obs: Observations) -> PoseResult:
+        """The pose from all matches: :meth:`consistent_pose` where ``config.consistent_pose``,
+        else ORB-SLAM2's pose-only optimisation."""
+        if self.config.consistent_pose:
+            return self.consistent_pose(T_init, P_w, obs)
+        return optimize_pose(self.camera, self.bf, T_init, P_w, obs)
 
     def consistent_pose(self, T_init: np.ndarray, P_w: np.ndarray, obs: Observations,
                         threshold_px: float = 3.0) -> PoseResult:
@@ -412,7 +417,7 @@ class FeatureTracker:
         w = np.concatenate([kf.weights[s] for kf, s in zip(kfs, sels)])
         T = np.stack([kf.T_c_w for kf in kfs])
         T, P, chi2 = local_bundle_adjustment(self.camera, self.bf, T, fixed, self.map.P_w[pts],
-                                             kf_of_obs, pt_of_obs, obs, w, cfg.ba_max_nfev)
+                                             kf_of_obs, pt_of_obs, obs, w, cfg.ba_iterations)
         self.map.P_w[pts] = P
         bad = chi2 > obs.chi2_gate  # outlier observations are erased, as in ORB-SLAM2
         for j, (kf, s) in enumerate(zip(kfs, sels)):

@@ -14,8 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix
 
 from ..geometry import PinholeCamera, hat, se3_exp
 
@@ -173,12 +171,12 @@ def optimize_pose(camera: PinholeCamera, bf: float, T_c_w: np.ndarray, P_w: np.n
 def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray, fixed: np.ndarray,
                             P_w: np.ndarray, kf_of_obs: np.ndarray, pt_of_obs: np.ndarray,
                             obs: Observations, weights: np.ndarray | None = None,
-                            max_nfev: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                            iterations: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bundle adjustment of a keyframe window: poses (except the fixed ones) and points.
 
-    Solved with scipy's trust-region least squares (``least_squares``, analytic sparse
-    Jacobian) in ORB-SLAM2's two phases: Huber-weighted, then the inliers alone. Poses are
-    updated as ``exp(xi_k) T_k``.
+    ORB-SLAM2's two phases: ``iterations`` Levenberg-Marquardt steps with Huber weights (here
+    fixed IRLS weights of the phase), then the chi2 outliers leave and the inliers get twice as
+    many steps without a kernel (ORB-SLAM2: 5 and 10). Poses are updated as ``exp(xi_k) T_k``.
 
     Parameters
     ----------
@@ -191,63 +189,106 @@ def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray,
     -------
     T_c_w (K, 4, 4), P_w (M, 3), chi2 (N,) of each observation after the adjustment
     """
-    K, M = len(T_c_w), len(P_w)
+    T = np.array(T_c_w, float)
+    P = np.array(P_w, float)
+    slot = -np.ones(len(T), int)  # index of each free pose among the free ones
     free = np.flatnonzero(~np.asarray(fixed))
-    slot = -np.ones(K, int)
     slot[free] = np.arange(len(free))
-    sw = np.sqrt(obs.info * (np.ones(len(obs.info)) if weights is None else weights))
-    nP = 6 * len(free)
-    T0 = np.asarray(T_c_w, float)
+    base = obs.info * (np.ones(len(obs.info)) if weights is None else weights)
+    gate = obs.chi2_gate
 
-    def unpack(x):
-        T = T0.copy()
-        for k in free:
-            T[k] = se3_exp(x[6 * slot[k]: 6 * slot[k] + 6]) @ T0[k]
-        return T, x[nP:].reshape(M, 3)
+    def chi2_of(T, P):
+        e, _ = residuals(camera, bf, T[kf_of_obs, :3, :3], T[kf_of_obs, :3, 3], P[pt_of_obs], obs)
+        return obs.info * np.sum(e**2, axis=1)
 
-    n = len(pt_of_obs)
-    has = slot[kf_of_obs] >= 0
+    if free.size:
+        for phase, steps in (("huber", iterations), ("inliers", 2 * iterations)):
+            chi2 = chi2_of(T, P)
+            if phase == "huber":  # weight sqrt(gate / chi2) beyond the threshold
+                w = base * np.where(chi2 > gate, np.sqrt(gate / np.maximum(chi2, 1e-12)), 1.0)
+            else:
+                w = base * (chi2 <= gate)
+            T, P = _levenberg_marquardt(camera, bf, T, P, slot, kf_of_obs, pt_of_obs, obs, w, steps)
+    return T, P, chi2_of(T, P)
 
-    def errors(x):
-        T, P = unpack(x)
+
+def _sum_blocks(index: np.ndarray, size: int, values: np.ndarray) -> np.ndarray:
+    """(size, *block) sums of the per-observation blocks ``values`` (N, *block) by ``index`` (N,)."""
+    d = int(np.prod(values.shape[1:]))
+    flat = (index[:, None] * d + np.arange(d)).ravel()
+    return np.bincount(flat, values.reshape(-1), size * d).reshape((size,) + values.shape[1:])
+
+
+def _levenberg_marquardt(camera, bf, T, P, slot, kf_of_obs, pt_of_obs, obs, w, steps):
+    """Minimise ``sum_i w_i |e_i|^2`` over the free poses and every point.
+
+    Each step solves ``(J^T W J + lambda I) delta = -J^T W e`` by the Schur complement on the
+    points, as g2o does: the 3x3 point blocks V_m are inverted in one batch and only the poses'
+    6K x 6K system ``(U - W V^-1 W^T) d_c = -g_c + W V^-1 g_p`` is solved densely, then
+    ``d_p = V^-1 (-g_p - W^T d_c)`` (Triggs et al., Bundle Adjustment - A Modern Synthesis, 2000,
+    sec. 6.1). Damping lambda starts at ``tau`` = 1e-3 of the largest diagonal entry, the choice
+    of Madsen, Nielsen & Tingleff (Methods for non-linear least squares problems, 2004, sec. 3.2)
+    for a start not known to be close (new keyframe, new points, outliers left in the Huber
+    phase); g2o's 1e-5 took larger first steps and was worse on all three real-clip runs we
+    measured (Bonn crowd: bgrestore 0.032 vs 0.017 m, weightedstatic 0.024 vs 0.019 m ATE).
+    It then follows the gain ratio (Nielsen's rule, as g2o).
+    """
+    K, M = int(slot.max()) + 1, len(P)
+    s = slot[kf_of_obs]
+    has = s >= 0  # observations from a free keyframe
+    s0 = np.where(has, s, 0)
+    # pairs (i, j) of observations of one point, both from free keyframes: the terms of W V^-1 W^T
+    by_pt = np.flatnonzero(has)
+    by_pt = by_pt[np.argsort(pt_of_obs[by_pt], kind="stable")]
+    count = np.bincount(pt_of_obs[by_pt], minlength=M)[pt_of_obs[by_pt]]
+    first = np.searchsorted(pt_of_obs[by_pt], pt_of_obs[by_pt])  # first observation of the same point
+    pi = np.repeat(by_pt, count)
+    pj = by_pt[np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+
+    def linearise(T, P):
         R = T[kf_of_obs, :3, :3]
         e, P_c = residuals(camera, bf, R, T[kf_of_obs, :3, 3], P[pt_of_obs], obs)
-        return e, P_c, R
+        return e, P_c, R, float(np.sum(w * np.sum(e**2, axis=1)))
 
-    def fun(x):
-        return (errors(x)[0] * sw[:, None]).ravel()
-
-    def jac(x):
-        # analytic: d e / d P_w = J_p R; d e / d xi_k = J_p [I | -P_c^]. The pose derivative is
-        # taken at xi = 0 (exact at the start, a close approximation for the small steps of BA).
-        _, P_c, R = errors(x)
-        J_pt = (point_jacobian(camera, bf, P_c, obs.stereo) * sw[:, None, None]) @ R  # (n, 3, 3)
-        J_kf = pose_jacobian(camera, bf, P_c[has], obs.stereo[has], sw[has])  # (n_has, 3, 6)
-        rows = np.arange(3 * n).reshape(n, 3)
-        r_pt = np.repeat(rows, 3, axis=1).ravel()
-        c_pt = (nP + 3 * pt_of_obs[:, None, None] + np.zeros((1, 3, 1), int) + np.arange(3)).ravel()
-        r_kf = np.repeat(rows[has], 6, axis=1).ravel()
-        c_kf = (6 * slot[kf_of_obs[has]][:, None, None] + np.zeros((1, 3, 1), int) + np.arange(6)).ravel()
-        return coo_matrix((np.concatenate([J_pt.ravel(), J_kf.ravel()]),
-                           (np.concatenate([r_pt, r_kf]), np.concatenate([c_pt, c_kf]))),
-                          shape=(3 * n, nP + 3 * M)).tocsr()
-
-    # ORB-SLAM2's two phases: robust (Huber weights, here as one IRLS reweighting of a plain
-    # least-squares solve, which scipy's trust region converges on in a few steps), then the
-    # chi2 outliers leave and the inliers are solved without a kernel.
-    x = np.concatenate([np.zeros(nP), np.asarray(P_w, float).ravel()])
-    base = sw.copy()
-    gate = obs.chi2_gate
-    for phase in ("huber", "inliers"):
-        chi2 = obs.info * np.sum(errors(x)[0] ** 2, axis=1)
-        if phase == "huber":
-            sw = base * np.where(chi2 > gate, (gate / np.maximum(chi2, 1e-12)) ** 0.25, 1.0)
-        else:
-            sw = base * (chi2 <= gate)
-        x = least_squares(fun, x, jac=jac, max_nfev=max_nfev, method="trf", tr_solver="lsmr").x
-    T, P = unpack(x)
-    chi2 = obs.info * np.sum(errors(x)[0] ** 2, axis=1)
-    return T, P, chi2
+    e, P_c, R, cost = linearise(T, P)
+    lam, nu = None, 2.0
+    for _ in range(steps):
+        J_p = point_jacobian(camera, bf, P_c, obs.stereo) @ R  # (N, 3, 3) d e / d P_w
+        J_c = pose_jacobian(camera, bf, P_c, obs.stereo) * has[:, None, None]  # (N, 3, 6) d e / d xi
+        wJ_p, wJ_c = w[:, None, None] * J_p, w[:, None, None] * J_c
+        V = _sum_blocks(pt_of_obs, M, np.einsum("nki,nkj->nij", wJ_p, J_p))
+        U = _sum_blocks(s0, K, np.einsum("nki,nkj->nij", wJ_c, J_c))
+        W = np.einsum("nki,nkj->nij", wJ_c, J_p)  # (N, 6, 3); 0 where the keyframe is fixed
+        g_p = _sum_blocks(pt_of_obs, M, np.einsum("nki,nk->ni", wJ_p, e))
+        g_c = _sum_blocks(s0, K, np.einsum("nki,nk->ni", wJ_c, e))
+        if lam is None:
+            lam = 1e-3 * max(np.einsum("kii->ki", U).max(), np.einsum("mii->mi", V).max(), 1e-12)
+        while True:
+            V_inv = np.linalg.inv(V + lam * np.eye(3))
+            Y = W @ V_inv[pt_of_obs]  # (N, 6, 3): W_i V_m^-1
+            WVW = _sum_blocks(s[pi] * K + s[pj], K * K, Y[pi] @ W[pj].transpose(0, 2, 1))
+            S = np.zeros((K, 6, K, 6))
+            S[np.arange(K), :, np.arange(K), :] = U + lam * np.eye(6)
+            S = S.reshape(6 * K, 6 * K) - WVW.reshape(K, K, 6, 6).transpose(0, 2, 1, 3).reshape(6 * K, 6 * K)
+            rhs = -g_c + _sum_blocks(s0, K, np.einsum("nij,nj->ni", Y, g_p[pt_of_obs]))
+            d_c = np.linalg.solve(S, rhs.ravel()).reshape(K, 6)
+            Wd = _sum_blocks(pt_of_obs, M, np.einsum("nij,ni->nj", W, d_c[s0]))
+            d_p = -np.einsum("mij,mj->mi", V_inv, g_p + Wd)
+            T_new = T.copy()
+            for k in np.flatnonzero(slot >= 0):
+                T_new[k] = se3_exp(d_c[slot[k]]) @ T[k]
+            e_new, P_c_new, R_new, cost_new = linearise(T_new, P + d_p)
+            if cost_new < cost:  # accept; gain ratio = actual / predicted decrease
+                predicted = d_c.ravel() @ (lam * d_c.ravel() - g_c.ravel()) + d_p.ravel() @ (lam * d_p.ravel() - g_p.ravel())
+                rho = (cost - cost_new) / max(predicted, 1e-300)
+                lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+                T, P, e, P_c, R, cost = T_new, P + d_p, e_new, P_c_new, R_new, cost_new
+                break
+            lam, nu = lam * nu, nu * 2.0
+            if nu > 2.0**10:  # no step lowers the cost: at the minimum
+                return T, P
+    return T, P
 
 
 __all__ = ["CHI2_MONO", "CHI2_STEREO", "Observations", "residuals", "point_jacobian",

@@ -140,6 +140,7 @@ def align(
     T_init: np.ndarray | None = None,
     mask_ref: np.ndarray | None = None,
     config: DenseConfig | None = None,
+    shared: dict | None = None,
 ) -> DenseResult:
     """Estimate ``T_cur_ref`` by coarse-to-fine Gauss-Newton on eq. 5.
 
@@ -149,6 +150,9 @@ def align(
     depth_ref, depth_cur : (H, W) float32 metres, 0 = invalid
     T_init : (4, 4) initial guess of T_cur_ref (identity when None)
     mask_ref : (H, W) bool, reference pixels allowed in the sums (static background); all if None
+    shared : a dict kept by the caller between alignments of the same frame pair (paper A aligns
+        each pair several times, with different masks): the pyramids and the current frame's
+        gradients are built once, by the first call
     Returns
     -------
     DenseResult
@@ -163,10 +167,12 @@ def align(
         check_pose("T_init", T_init)
     cfg = config or DenseConfig()
     T = np.eye(4) if T_init is None else np.asarray(T_init, float).copy()
-    gref = image_pyramid(gray_ref.astype(np.float32), cfg.levels)
-    dref = depth_pyramid(depth_ref, cfg.levels)
-    gcur = image_pyramid(gray_cur.astype(np.float32), cfg.levels)
-    dcur = depth_pyramid(depth_cur, cfg.levels)
+    shared = {} if shared is None else shared
+    if shared.get("levels", 0) < cfg.levels:
+        shared.update(levels=cfg.levels, pyramids=(
+            image_pyramid(gray_ref.astype(np.float32), cfg.levels), depth_pyramid(depth_ref, cfg.levels),
+            image_pyramid(gray_cur.astype(np.float32), cfg.levels), depth_pyramid(depth_cur, cfg.levels)))
+    gref, dref, gcur, dcur = shared["pyramids"]  # coarser levels unused when this call has fewer
     mref = None
     if mask_ref is not None:
         mref = image_pyramid(mask_ref.astype(np.float32), cfg.levels)
@@ -175,7 +181,9 @@ def align(
     iters = list(cfg.iterations) + [cfg.iterations[-1]] * max(0, cfg.levels - len(cfg.iterations))
     for level in range(cfg.levels - 1, cfg.finest_level - 1, -1):
         cam = camera.scaled(level)
-        cur = _Level(gcur[level], dcur[level], cam)
+        if ("current", level) not in shared:
+            shared["current", level] = _Level(gcur[level], dcur[level], cam)
+        cur = shared["current", level]
         z = dref[level]
         sel = (z > cfg.min_depth_m) & (z < cfg.max_depth_m)
         if mref is not None:

@@ -81,9 +81,9 @@ def _contains(box: Box, point: np.ndarray) -> bool:
     return bool(np.all(np.abs(local) <= box.half))
 
 
-def _screen_rect(camera: PinholeCamera, T_c_w: np.ndarray, box: Box) -> np.ndarray | None:
-    """Flat indices of the pixels inside the projected bounding rectangle of a box, or None
-    (= all pixels) when the box reaches behind the camera."""
+def _screen_bounds(camera: PinholeCamera, T_c_w: np.ndarray, box: Box) -> tuple[int, int, int, int] | None:
+    """(u0, u1, v0, v1) pixel bounds of the projected box, clipped to the image (u0 > u1 or
+    v0 > v1: outside), or None when the box reaches behind the camera (no bound)."""
     corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * box.half
     p_w = corners @ box.T_w_b[:3, :3].T + box.T_w_b[:3, 3]
     p_c = p_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
@@ -91,8 +91,17 @@ def _screen_rect(camera: PinholeCamera, T_c_w: np.ndarray, box: Box) -> np.ndarr
         return None
     u = camera.fx * p_c[:, 0] / p_c[:, 2] + camera.cx
     v = camera.fy * p_c[:, 1] / p_c[:, 2] + camera.cy
-    u0, u1 = int(max(np.floor(u.min()), 0)), int(min(np.ceil(u.max()), camera.width - 1))
-    v0, v1 = int(max(np.floor(v.min()), 0)), int(min(np.ceil(v.max()), camera.height - 1))
+    return (int(max(np.floor(u.min()), 0)), int(min(np.ceil(u.max()), camera.width - 1)),
+            int(max(np.floor(v.min()), 0)), int(min(np.ceil(v.max()), camera.height - 1)))
+
+
+def _screen_rect(camera: PinholeCamera, T_c_w: np.ndarray, box: Box) -> np.ndarray | None:
+    """Flat indices of the pixels inside the projected bounding rectangle of a box, or None
+    (= all pixels) when the box reaches behind the camera."""
+    b = _screen_bounds(camera, T_c_w, box)
+    if b is None:
+        return None
+    u0, u1, v0, v1 = b
     if u0 > u1 or v0 > v1:
         return np.zeros(0, np.int64)
     cols = np.arange(u0, u1 + 1)
@@ -135,7 +144,8 @@ def render(
     prim = np.full(n, -1, np.int32)
     all_boxes: list[Box] = []
 
-    def consider(box: Box, idx: np.ndarray | None) -> None:
+    def consider(box: Box, idx: np.ndarray | None, sub: np.ndarray | None = None) -> None:
+        """Nearest hits so far, with ``box`` on the rays ``idx`` (None: all; ``sub`` = their directions)."""
         k = len(all_boxes)
         all_boxes.append(box)
         if idx is None:
@@ -144,7 +154,7 @@ def render(
             t_best[closer] = t[closer]
             prim[closer] = k
         elif idx.size:
-            t = _slab(box, origin, dirs[:, idx])
+            t = _slab(box, origin, dirs[:, idx] if sub is None else sub)
             closer = t < t_best[idx]
             sel = idx[closer]
             t_best[sel] = t[closer]
@@ -161,8 +171,15 @@ def render(
             tb = _slab(group.bound, origin, dirs[:, rect])
             idx = rect[tb < t_best[rect]]
         if idx.size:
+            sub = dirs[:, idx]  # gathered once; each part tests the rays inside its own rectangle
+            row, col = np.divmod(idx, W)
             for part in group.parts:
-                consider(part, idx)
+                b = _screen_bounds(camera, T_c_w, part)
+                if b is None:
+                    consider(part, idx, sub)
+                    continue
+                inside = (col >= b[0]) & (col <= b[1]) & (row >= b[2]) & (row <= b[3])
+                consider(part, idx[inside], sub[:, inside])
 
     rgb = np.zeros((n, 3), np.float32)
     dynamic = np.zeros(n, bool)

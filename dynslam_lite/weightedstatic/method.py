@@ -3,9 +3,9 @@
 Per frame, in the frontend's pose step (:meth:`WeightedStaticTracker.estimate`):
 
 1. keypoints inside the semantic masks are dropped at extraction ("semantic static points");
-2. a first pose by the frontend's robust pose-only optimisation (ours, ``consistent_first``: on
-   the matches PnP-RANSAC finds consistent, so that an object moving as a whole cannot pull
-   the pose the geometric test is judged with; see
+2. a first pose by the frontend's robust pose-only optimisation (ours, the frontend's
+   ``consistent_pose``, on by default here: on the matches PnP-RANSAC finds consistent, so that
+   an object moving as a whole cannot pull the pose the geometric test is judged with; see
    :meth:`~dynslam_lite.features.frontend.FeatureTracker.consistent_pose`);
 3. the weighted geometric test (:mod:`.geometric`) of every match against the keyframes sharing
    most points with the frame, with that pose; the median score over the references decides;
@@ -36,7 +36,9 @@ class WeightedStaticConfig:
 
     Attributes
     ----------
-    frontend : the shared feature frontend, see :class:`FrontendConfig`
+    frontend : the shared feature frontend, see :class:`FrontendConfig`; here with
+        ``consistent_pose`` on: the first pose from the matches PnP-RANSAC finds consistent
+        (ours; False = ORB-SLAM2's pose-only optimisation over all matches, the paper's)
     geometric : the weighted geometric test (sigma1, sigma2), see :class:`GeometricConfig`
     eta, omega : contributions of the semantic and geometric masks to the initial weight
         (eq. 6; 0.5 and 0.5 in the paper)
@@ -46,12 +48,10 @@ class WeightedStaticConfig:
     use_geometry : False skips the geometric test (ablation: mask_geo = 1 everywhere)
     use_weights : False replaces the joint optimisation by dropping the geometrically dynamic
         points and running the frontend's pose-only optimisation (ablation)
-    consistent_first : the first pose from the matches PnP-RANSAC finds consistent (ours);
-        False = the frontend's pose-only optimisation over all matches (paper)
     cull_dynamic : points judged dynamic are removed from the map
     """
 
-    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    frontend: FrontendConfig = field(default_factory=lambda: FrontendConfig(consistent_pose=True))
     geometric: GeometricConfig = field(default_factory=GeometricConfig)
     eta: float = 0.5
     omega: float = 0.5
@@ -61,7 +61,6 @@ class WeightedStaticConfig:
     use_geometry: bool = True
     use_weights: bool = True
     cull_dynamic: bool = True
-    consistent_first: bool = True
 
 
 class WeightedStaticTracker(FeatureTracker):
@@ -104,10 +103,7 @@ class WeightedStaticTracker(FeatureTracker):
         cfg = self.paper
         obs = self.observations(feats, kp_idx)
         P = self.map.P_w[map_idx]
-        if cfg.consistent_first:
-            first = self.consistent_pose(T_init, P, obs)
-        else:
-            first = optimize_pose(self.camera, self.bf, T_init, P, obs)
+        first = self.first_pose(T_init, P, obs)
         if cfg.use_geometry:
             delta = self.geometric_scores(feats, map_idx, kp_idx, first.T_c_w)
             geo_dynamic = np.nan_to_num(delta) >= cfg.geometric.sigma2
