@@ -22,7 +22,7 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from . import experiments, tables
@@ -30,7 +30,7 @@ from .errors import BatchError, ConfigError, Interrupted
 from .download import ARCHIVES
 from .evaluation import evaluate
 from .experiments import Run, RunRecord
-from .io import atomic_write_text, format_trajectory, open_sequence, parse_trajectory
+from .io import KeptSequence, atomic_write_text, format_trajectory, open_sequence, parse_trajectory
 from .pipeline import run_method
 from .reports import ReportWriter, code_fingerprint, fmt
 from .synth import SCENES, ensure_scene
@@ -267,6 +267,18 @@ def generate_scene(job: tuple) -> str:
     return str(ensure_scene(cache, scene, frames, seed))
 
 
+_KEPT: dict[str, KeptSequence] = {}  # the sequence this worker process tracked last
+
+
+def _open_kept(path: str) -> KeptSequence:
+    """The sequence at ``path`` with its frames kept in memory while this worker's jobs stay on
+    it (the plan lists a sequence's runs one after another)."""
+    if path not in _KEPT:
+        _KEPT.clear()
+        _KEPT[path] = KeptSequence(open_sequence(path))
+    return _KEPT[path]
+
+
 def evaluate_run(job: Job) -> Done | Failure:
     """Track and score one job (in a worker process): the record and the trajectory text, which
     is what gets scored (notebook 90 reads the same rounded poses). An exception is returned as
@@ -274,7 +286,7 @@ def evaluate_run(job: Job) -> Done | Failure:
     t = time.perf_counter()
     run = job.run
     try:
-        seq = open_sequence(job.path)
+        seq = _open_kept(job.path)
         _say(f"[run] {job.sequence:32s} {run.label:42s} started ({len(seq)} frames)")
         masks = run.mask_source(job.kind)
         r = run_method(run.method, seq, run.overrides, masks=masks)
@@ -305,6 +317,16 @@ def execute_notebook(job: tuple) -> tuple[str, float, str]:
     except Exception as exc:  # reported in the summary; the run fails without touching reports/
         last = str(exc).strip().splitlines()[-1] if str(exc).strip() else ""
         return name, time.perf_counter() - t, f"{type(exc).__name__}: {last}"
+
+
+def _last_seconds(executed: Path) -> float:
+    """How long the notebook took in the last reproduction (papermill's record in its executed
+    copy; 0 when there is none): the batch starts the longest first, so that the kernels finish
+    together."""
+    try:
+        return float(json.loads(executed.read_text(encoding="utf-8"))["metadata"]["papermill"]["duration"] or 0.0)
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
 
 
 # ------------------------------------------------------------------ run cache
@@ -403,14 +425,16 @@ def _reproduce(opt: Options) -> int:
         found, missing = papers_data(root)
         _say(f"[papers] {len(found)} of the papers' {len(ARCHIVES)} sequences under {root}"
              + "".join(f"\n[papers] missing {m}" for m in missing))
-        opt.data = list(dict.fromkeys([*opt.data, *found]))
+        opt = replace(opt, data=list(dict.fromkeys([*opt.data, *found])))  # the caller's stays as it was
+    lengths = {}
     for d in opt.data:
-        seq = open_sequence(d)  # validate real data before any long work, with a clear error
-        _say(f"[data] {d}: {len(seq)} frames")
+        lengths[d] = len(open_sequence(d))  # validate real data before any long work, with a clear error
+        _say(f"[data] {d}: {lengths[d]} frames")
     with run_executor(opt) as (pool, workers):
         scenes = list(prof["scenes"])
         paths = dict(zip(scenes, pool.map(generate_scene, [(str(cache), s, frames, opt.seed) for s in scenes])))
         for scene, path in paths.items():
+            lengths[path] = frames
             _say(f"[data] synthetic {scene}: {frames} frames at {path}")
         jobs = plan(paths, opt.data)
         t_runs = time.perf_counter()
@@ -423,9 +447,10 @@ def _reproduce(opt: Options) -> int:
              + (f" of the Dask cluster at {opt.scheduler}" if opt.scheduler else ""))
         for k, (job, o) in enumerate(((j, o) for j, o in zip(jobs, outcomes) if o is not None), 1):
             _say(f"[cached {k}] {job.sequence:32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
-        eta = Estimate(Path(opt.reports) / "trajectories" / "runs.json", [jobs[i] for i in todo], workers)
+        eta = Estimate(Path(opt.reports) / "trajectories" / "runs.json", [jobs[i] for i in todo], lengths, workers)
         _say(eta.plan())
-        futures = {pool.submit(evaluate_run, jobs[i]): i for i in todo}
+        index = {job: i for i, job in enumerate(jobs)}
+        futures = {pool.submit(evaluate_run, job): index[job] for job in eta.order([jobs[i] for i in todo])}
         for k, fut in enumerate(as_completed(futures), 1):
             outcome = fut.result()
             outcomes[futures[fut]] = outcome
@@ -456,6 +481,7 @@ def _reproduce(opt: Options) -> int:
                    for name, params in notebooks.items() if opt.notebooks]
         portable = {out: _relative(opt.reports), str(cache.resolve()): _relative(cache), f"{ROOT}{os.sep}": "",
                     str(writer.tmp): _relative(opt.reports)}  # papermill's metadata: the relative form
+        nb_jobs.sort(key=lambda job: -_last_seconds(Path(opt.reports) / "executed" / f"{job[0]}.ipynb"))
         with notebook_executor(opt) as nb_pool:
             for (name, secs, err), (_, _, path) in zip(nb_pool.map(execute_notebook, nb_jobs), nb_jobs):
                 _say(f"[notebook] {name}: {'FAILED ' + err if err else 'ok'} ({secs:.0f} s)")
@@ -493,7 +519,7 @@ class Estimate:
 
     DEFAULT_MS = 300.0  # ms/frame of a method never measured here
 
-    def __init__(self, runs_json: Path, jobs: list[Job], workers: int):
+    def __init__(self, runs_json: Path, jobs: list[Job], lengths: dict[str, int], workers: int):
         measured: dict[str, list[float]] = {}
         try:
             for r in json.loads(runs_json.read_text(encoding="utf-8")):
@@ -501,22 +527,24 @@ class Estimate:
         except (OSError, ValueError, KeyError, TypeError):
             pass  # no earlier reproduction: the default rate
         self.ms = {m: sum(v) / len(v) for m, v in measured.items() if v}
-        lengths = {path: self._length(path) for path in {job.path for job in jobs}}
-        self.frames = {job: lengths[job.path] for job in jobs}
+        self.frames = {job: lengths.get(job.path, 0) for job in jobs}
         self.workers = max(workers, 1)
         self.left = sum(self._seconds(job) for job in jobs)
         self.estimated_done = 0.0
         self.t0 = time.perf_counter()
 
-    @staticmethod
-    def _length(path: str) -> int:
-        try:
-            return len(open_sequence(path))
-        except Exception:  # noqa: BLE001 - unreadable data fails in its run, with its error
-            return 0
-
     def _seconds(self, job: Job) -> float:
         return self.frames.get(job, 0) * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
+
+    def order(self, jobs: list[Job]) -> list[Job]:
+        """Submission order: the sequence with the most estimated work first, and within one the
+        longest runs first. A sequence's runs stay together (a worker keeps the frames of the
+        sequence it tracked last) and the short runs come last, where workers would otherwise
+        wait for each other's long ones."""
+        total: dict[str, float] = {}
+        for job in jobs:
+            total[job.path] = total.get(job.path, 0.0) + self._seconds(job)
+        return sorted(jobs, key=lambda j: (-total[j.path], j.path, -self._seconds(j)))
 
     def plan(self) -> str:
         frames = sum(self.frames.values())

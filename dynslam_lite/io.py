@@ -13,7 +13,7 @@ import json
 import math
 import os
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import cv2
@@ -466,6 +466,31 @@ class RGBDSequence:
             None if self.instance_files is None else self.instance_files[sl], self.classes,
             None if self.moving_ids is None else self.moving_ids[sl],
         )
+
+
+class KeptSequence(RGBDSequence):
+    """A sequence whose frames stay in memory once read, read-only, up to ``budget_bytes``
+    (the first frames read; the rest are decoded each time). The batch keeps the last sequence
+    a worker tracked, so the runs of one sequence decode its PNGs once per worker."""
+
+    def __init__(self, seq: RGBDSequence, budget_bytes: int = 1 << 30):
+        super().__init__(**{f.name: getattr(seq, f.name) for f in fields(seq)})
+        self.budget_bytes = budget_bytes
+        self._kept: dict[int, Frame] = {}
+        self._bytes = 0
+
+    def __getitem__(self, i: int) -> Frame:
+        if -len(self) <= i < len(self) and i % len(self) in self._kept:
+            return self._kept[i % len(self)]
+        frame = super().__getitem__(i)
+        arrays = [a for a in (frame.rgb, frame.depth, frame.mask, frame.instances) if a is not None]
+        size = sum(a.nbytes for a in arrays)
+        if self._bytes + size <= self.budget_bytes:
+            for a in arrays:
+                a.setflags(write=False)  # shared by every run: a method must not write into it
+            self._kept[i % len(self)] = frame
+            self._bytes += size
+        return frame
 
 
 def load_rgb(path: Path) -> np.ndarray:

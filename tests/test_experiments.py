@@ -32,14 +32,15 @@ def test_every_run_is_valid_and_labelled_once():
 
 def test_runs_per_sequence_follow_the_run_sets():
     assert [r.label for r in E.runs_for("synthetic", "static_xyz")] == [
-        "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic"]
+        "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic", E.OPENCV_FAST.label]
+    assert E.OPENCV_FAST not in E.runs_for("synthetic", "sitting_xyz")
     xyz = E.runs_for("synthetic", "walking_xyz")
-    assert len(xyz) == 14 and xyz[-1] is E.BG_ADJACENT and E.BGRESTORE in xyz
+    assert len(xyz) == 15 and xyz[-1] is E.BG_ADJACENT and E.BGRESTORE in xyz
     carry = E.runs_for("synthetic", "walking_carry")
     assert carry == list(E.OBJECT_ROWS) and E.DEPTHCLUSTER not in carry
     real = E.runs_for("real")
     assert E.WEIGHTEDSTATIC.mask_source("real") == "person" and E.WEIGHTEDSTATIC.mask_source("synthetic") == "oracle"
-    assert E.BG_NO_RESTORE not in real and E.STATIC_ORB_PERSON in real
+    assert E.BG_NO_RESTORE not in real and E.OPENCV_FAST in real and E.STATIC_ORB_PERSON in real
 
 
 def _files():

@@ -21,6 +21,20 @@ def test_same_seed_same_bytes(tmp_path):
     assert (a / "rgb.txt").read_text() != (c / "rgb.txt").read_text()
 
 
+def test_background_scene_reuses_the_plain_frames_byte_for_byte(tmp_path):
+    from dynslam_lite.synth import ensure_scene
+
+    plain = ensure_scene(tmp_path / "shared", "walking_xyz", 3, seed=7)
+    copied = ensure_scene(tmp_path / "shared", "walking_xyz", 3, seed=7, background=True)
+    rendered = ensure_scene(tmp_path / "alone", "walking_xyz", 3, seed=7, background=True)
+    assert copied != plain and copied.name == rendered.name
+    for sub in ("rgb", "depth", "masks", "instances", "background", "background_depth"):
+        fa, fb = sorted((copied / sub).iterdir()), sorted((rendered / sub).iterdir())
+        assert len(fa) == 3 and [f.read_bytes() for f in fa] == [f.read_bytes() for f in fb]
+    for name in ("rgb.txt", "depth.txt", "groundtruth.txt", "instances.json", "scene.json"):
+        assert (copied / name).read_text() == (rendered / name).read_text()
+
+
 def test_tum_layout_association_and_masks(scene):
     path = scene("walking_xyz", 45, background=True)
     seq = open_sequence(path)

@@ -18,9 +18,9 @@ which gives t only up to scale and no metric depth for the mapping. With RGB-D w
 and the tracked keyframe poses, so ``T_cur_kf`` comes from the frontend; notebook 30 shows the
 paper's F -> E -> (R, t) route beside it.
 
-Vectorised: the projection of every keyframe pixel is one matrix product, the splat is four
-``np.bincount`` calls per channel; a coarse pass on every 8th pixel first finds the part of each
-keyframe's blocks that can land in the hole, so only those are projected at full resolution.
+Vectorised: the projection of every keyframe pixel is one matrix product, the splat is one
+``np.bincount`` per channel over the four corners of every point; a coarse pass on every 8th pixel first finds the part of
+each keyframe's blocks that can land in the hole, so only those are projected at full resolution.
 """
 from __future__ import annotations
 
@@ -67,15 +67,31 @@ class Restoration:
     filled: np.ndarray
 
 
+def _bbox(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """(row0, row1, col0, col1) bounding ``mask`` (end exclusive), None when it is empty."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    return None if not rows.size else (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1)
+
+
 def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, use: np.ndarray | None = None,
              step: int = 1):
     """Keyframe pixels with depth, outside ``kf.invalid`` (and inside ``use`` where given), every
     ``step``-th row and column, moved into the current camera: (x, y, depth there, u, v)."""
-    z = kf.depth[::step, ::step]
-    ok = (z > 0) & ~kf.invalid[::step, ::step]
-    v, u = np.nonzero(ok if use is None else ok & use)
+    r0, c0 = 0, 0
+    if use is None:
+        z = kf.depth[::step, ::step]
+        ok = (z > 0) & ~kf.invalid[::step, ::step]
+    else:  # only the bounding box of ``use`` is searched (the same pixels, in the same order)
+        box = _bbox(use)
+        if box is None:
+            none = np.zeros(0, np.float32)
+            return none, none, none, none.astype(np.int64), none.astype(np.int64)
+        r0, r1, c0, c1 = box
+        z = kf.depth[r0:r1, c0:c1]
+        ok = (z > 0) & ~kf.invalid[r0:r1, c0:c1] & use[r0:r1, c0:c1]
+    v, u = np.nonzero(ok)
     z = z[v, u].astype(np.float32)
-    v, u = v * step, u * step
+    v, u = v * step + r0, u * step + c0
     P = backproject(camera, u.astype(np.float32), v.astype(np.float32), z)
     Pc = P @ T_cur_kf[:3, :3].T.astype(np.float32) + T_cur_kf[:3, 3].astype(np.float32)
     front = Pc[:, 2] > 0.05
@@ -118,14 +134,13 @@ def splat(x: np.ndarray, y: np.ndarray, values: np.ndarray, hole: np.ndarray) ->
     base = (y0.astype(np.int64) + 1) * W2 + x0.astype(np.int64) + 1
     k = np.concatenate([base, base + 1, base + W2, base + W2 + 1])
     w = np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
-    inside = np.zeros((H + 2, W2), bool)
-    inside[1:-1, 1:-1] = hole
 
     def grid(weights):
         return np.bincount(k, weights, (H + 2) * W2).reshape(H + 2, W2)[1:-1, 1:-1] * hole
 
     wsum = grid(w)
-    acc = np.stack([grid(w * np.tile(values[:, c], 4)) for c in range(values.shape[1])], axis=-1)
+    w4 = w.reshape(4, -1)  # the four corners' weights of each point
+    acc = np.stack([grid((w4 * values[:, c]).reshape(-1)) for c in range(values.shape[1])], axis=-1)
     return acc, wsum
 
 
@@ -163,8 +178,11 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
             xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
             land = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
             land[land] = near_hole[yi[land], xi[land]]
-            vals = np.column_stack([kf.rgb[v[land], u[land]].astype(np.float32), zc[land]])
-            pts.append((x[land], y[land], yi[land] * W + xi[land], vals))
+            k = np.flatnonzero(land)
+            vals = np.empty((k.size, 4), np.float32)  # r, g, b, depth in the current camera
+            vals[:, :3] = kf.rgb[v[k], u[k]]
+            vals[:, 3] = zc[k]
+            pts.append((x[k], y[k], yi[k] * W + xi[k], vals))
     if pts:
         x, y, pix, vals = (np.concatenate(a) for a in zip(*pts))
         # visibility: at each landing pixel keep the nearest surface (within depth_tolerance)

@@ -248,6 +248,7 @@ class DepthClusterMethod(Method):
         self._cache: tuple[float, DepthClusters] | None = None
         self._prior: tuple[float, np.ndarray] | None = None
         self.iterations_used: list[int] = []
+        self.area = np.zeros(2)  # sums over pairs of the removed fraction: pre-removal, final
 
     def _clusters(self, frame) -> DepthClusters:
         if self._cache is not None and self._cache[0] == frame.timestamp:
@@ -271,11 +272,16 @@ class DepthClusterMethod(Method):
                 self._prior = (cur.timestamp, propagate_mask(res.moving, ref.depth, self.camera,
                                                              res.T_cur_ref))
         self.iterations_used.append(len(res.iterations) - 1)
+        self.area += [0.0 if res.preremoval is None else res.preremoval.mask.mean(), res.moving.mean()]
         labels = Labels(ref.index, {"final": res.moving})
         if res.preremoval is not None:
             labels.masks["preremoval"] = res.preremoval.mask
         return Tracked(res.T_cur_ref, res.ok, res.reason, labels=labels, detail=res)
 
     def extras(self) -> dict:
-        return {"mean_updates": float(np.mean(self.iterations_used)) if self.iterations_used else 0.0}
+        """Mean background updates per pair, and the mean fraction of the reference pixels
+        removed by pre-removal and in the end (whether or not anything moves)."""
+        n = max(len(self.iterations_used), 1)
+        return {"mean_updates": float(np.mean(self.iterations_used)) if self.iterations_used else 0.0,
+                "removed_area_preremoval": float(self.area[0] / n), "removed_area_final": float(self.area[1] / n)}
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .orb import Features
 
@@ -36,14 +37,18 @@ def search_by_projection(uv_proj: np.ndarray, desc: np.ndarray, feats: Features,
     if len(uv_proj) == 0 or len(feats) == 0:
         return np.zeros(0, int), np.zeros(0, int)
     r = radius_px * scale_factor ** feats.octave  # (N,)
-    du = np.abs(uv_proj[:, None, 0] - feats.uv[None, :, 0])
-    dv = np.abs(uv_proj[:, None, 1] - feats.uv[None, :, 1])
-    window = ((du <= r) & (dv <= r)).astype(np.uint8)
-    rows = np.flatnonzero(window.any(axis=1))
-    if rows.size == 0:
+    # the pairs within the largest window (k-d trees, Chebyshev distance), then each keypoint's own
+    pairs = cKDTree(uv_proj).sparse_distance_matrix(cKDTree(feats.uv), float(r.max()) + 1.0, p=np.inf,
+                                                    output_type="ndarray")
+    i, j = pairs["i"], pairs["j"]
+    inside = (np.abs(uv_proj[i, 0] - feats.uv[j, 0]) <= r[j]) & (np.abs(uv_proj[i, 1] - feats.uv[j, 1]) <= r[j])
+    i, j = i[inside], j[inside]
+    if i.size == 0:
         return np.zeros(0, int), np.zeros(0, int)
-    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
-    knn = bf.knnMatch(desc[rows], feats.desc, k=2, mask=window[rows])
+    rows, row_of = np.unique(i, return_inverse=True)  # map points with a keypoint in their window
+    window = np.zeros((rows.size, len(feats)), np.uint8)
+    window[row_of, j] = 1
+    knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc[rows], feats.desc, k=2, mask=window)
     q, t, d = [], [], []
     for i, m in enumerate(knn):
         if not m or m[0].distance > max_distance:

@@ -153,9 +153,10 @@ def optimize_pose(camera: PinholeCamera, bf: float, T_c_w: np.ndarray, P_w: np.n
                 w = w * np.where(chi2 > gate, np.sqrt(gate / np.maximum(chi2, 1e-12)), 1.0)
             if w.sum() == 0:
                 break
-            J = pose_jacobian(camera, bf, P_c, obs.stereo)
-            H = np.einsum("n,nij,nik->jk", w, J, J)
-            g = np.einsum("n,nij,ni->j", w, J, e)
+            J = pose_jacobian(camera, bf, P_c, obs.stereo).reshape(-1, 6)  # one row per error component
+            wJ = J * np.repeat(w, 3)[:, None]
+            H = wJ.T @ J
+            g = wJ.T @ e.reshape(-1)
             dx = np.linalg.solve(H + 1e-9 * np.eye(6), -g)
             T = se3_exp(dx) @ T
             if np.linalg.norm(dx) < 1e-7:
@@ -256,9 +257,10 @@ def _levenberg_marquardt(camera, bf, T, P, slot, kf_of_obs, pt_of_obs, obs, w, s
         J_p = point_jacobian(camera, bf, P_c, obs.stereo) @ R  # (N, 3, 3) d e / d P_w
         J_c = pose_jacobian(camera, bf, P_c, obs.stereo) * has[:, None, None]  # (N, 3, 6) d e / d xi
         wJ_p, wJ_c = w[:, None, None] * J_p, w[:, None, None] * J_c
-        V = _sum_blocks(pt_of_obs, M, np.einsum("nki,nkj->nij", wJ_p, J_p))
-        U = _sum_blocks(s0, K, np.einsum("nki,nkj->nij", wJ_c, J_c))
-        W = np.einsum("nki,nkj->nij", wJ_c, J_p)  # (N, 6, 3); 0 where the keyframe is fixed
+        wJ_pT, wJ_cT = wJ_p.transpose(0, 2, 1), wJ_c.transpose(0, 2, 1)
+        V = _sum_blocks(pt_of_obs, M, wJ_pT @ J_p)
+        U = _sum_blocks(s0, K, wJ_cT @ J_c)
+        W = wJ_cT @ J_p  # (N, 6, 3); 0 where the keyframe is fixed
         g_p = _sum_blocks(pt_of_obs, M, np.einsum("nki,nk->ni", wJ_p, e))
         g_c = _sum_blocks(s0, K, np.einsum("nki,nk->ni", wJ_c, e))
         if lam is None:

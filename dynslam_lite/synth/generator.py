@@ -136,6 +136,7 @@ def generate(
     seed: int = 0,
     background: bool = False,
     progress: bool = False,
+    people_from: Path | None = None,
 ) -> SynthStats:
     """Generate a synthetic sequence into ``out_dir`` (replaced as a whole when complete).
 
@@ -146,6 +147,9 @@ def generate(
     seed : textures, sensor noise, camera shake and timestamps derive from it
     background : also write every frame rendered without the people, colour (``background/``)
         and depth (``background_depth/``, same names), for inpainting scores
+    people_from : a folder this generator wrote for the same scene, frames and seed without the
+        background: its frames are copied, not rendered again (every frame depends on the
+        scene, seed and index alone, so the files are the same)
     """
     if scene not in SCENES:
         raise ConfigError(f"unknown synthetic scene {scene!r}: choose one of {', '.join(SCENES)}")
@@ -163,7 +167,10 @@ def generate(
         for sub in ("rgb", "depth", "masks", "instances") + (("background", "background_depth") if background else ()):
             (tmp / sub).mkdir()
         t_rgb, t_depth = _timestamps(frames, seed)
-        png = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+        # zlib strategies measured on these frames: Huffman coding alone for the noisy colour
+        # (smaller and faster to write and read than LZ77), run lengths for depth and labels
+        png = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
+        png_rle = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
         names = [f"{t:.6f}.png" for t in t_rgb]
         dnames = [f"{t:.6f}.png" for t in t_depth]
         moving_ids: list[list[int]] = []
@@ -174,17 +181,21 @@ def generate(
             iterator = tqdm(iterator, desc=f"synth {scene}", unit="frame")
         for i in iterator:
             s = t_rgb[i] - T0
-            rgb, depth, moving, instance = renderer.frame(i, s)
-            cv2.imwrite(str(tmp / "rgb" / names[i]), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), png)
-            cv2.imwrite(str(tmp / "depth" / dnames[i]), np.round(depth * 5000).astype(np.uint16), png)
-            cv2.imwrite(str(tmp / "masks" / names[i]), moving.astype(np.uint8) * 255, png)
-            cv2.imwrite(str(tmp / "instances" / names[i]), instance, png)
+            if people_from is not None:
+                for sub, name in (("rgb", names[i]), ("depth", dnames[i]), ("masks", names[i]), ("instances", names[i])):
+                    shutil.copyfile(Path(people_from) / sub / name, tmp / sub / name)
+            else:
+                rgb, depth, moving, instance = renderer.frame(i, s)
+                cv2.imwrite(str(tmp / "rgb" / names[i]), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), png)
+                cv2.imwrite(str(tmp / "depth" / dnames[i]), np.round(depth * 5000).astype(np.uint16), png_rle)
+                cv2.imwrite(str(tmp / "masks" / names[i]), moving.astype(np.uint8) * 255, png_rle)
+                cv2.imwrite(str(tmp / "instances" / names[i]), instance, png_rle)
             moving_ids.append(renderer.moving_ids(s))
             if background:
                 bg, bg_depth, _, _ = renderer.frame(i, s, with_people=False)
                 cv2.imwrite(str(tmp / "background" / names[i]), cv2.cvtColor(bg, cv2.COLOR_RGB2BGR), png)
                 cv2.imwrite(str(tmp / "background_depth" / names[i]),
-                            np.round(bg_depth * 5000).astype(np.uint16), png)
+                            np.round(bg_depth * 5000).astype(np.uint16), png_rle)
 
         def listing(title, sub, stamps, files):
             rows = [f"# {title}", "# timestamp filename"]
@@ -224,11 +235,14 @@ def ensure_scene(
     cache_dir: str | Path, scene: str, frames: int, seed: int = 0, background: bool = False
 ) -> Path:
     """Path of a generated scene in ``cache_dir``, generating it only when missing or stale."""
-    path = Path(cache_dir) / f"{scene}_n{frames}_s{seed}{'_bg' if background else ''}"
-    meta = path / "scene.json"
-    if meta.is_file():
-        info = json.loads(meta.read_text())
-        if info.get("generator_version") == GENERATOR_VERSION:
-            return path
-    generate(path, scene, frames, seed, background)
+    plain = Path(cache_dir) / f"{scene}_n{frames}_s{seed}"
+    path = plain.with_name(plain.name + "_bg") if background else plain
+
+    def current(folder: Path) -> bool:
+        meta = folder / "scene.json"
+        return meta.is_file() and json.loads(meta.read_text()).get("generator_version") == GENERATOR_VERSION
+
+    if not current(path):
+        # with the background: the frames with people are copied from the plain scene when it exists
+        generate(path, scene, frames, seed, background, people_from=plain if background and current(plain) else None)
     return path
