@@ -149,10 +149,18 @@ def _worker_init(jobs: int) -> None:
 
 def stop_children(grace_s: float = 3.0) -> None:
     """End every process this one started (workers, notebook kernels): SIGTERM, then SIGKILL
-    for those still alive after ``grace_s`` seconds."""
+    for those still alive after ``grace_s`` seconds. multiprocessing's resource tracker is left
+    alone: it ignores SIGTERM, ends by itself when this process exits, and killing it made the
+    pool's exit print its warnings and KeyErrors."""
     import psutil
 
-    children = psutil.Process().children(recursive=True)
+    def tracker(p) -> bool:
+        try:
+            return any("resource_tracker" in part for part in p.cmdline())
+        except psutil.Error:
+            return False
+
+    children = [c for c in psutil.Process().children(recursive=True) if not tracker(c)]
     for c in children:
         try:
             c.terminate()
