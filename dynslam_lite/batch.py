@@ -457,8 +457,7 @@ def _reproduce(opt: Options) -> int:
             _say(f"[cached {k}] {job.sequence:32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
         eta = Estimate(Path(opt.reports) / "trajectories" / "runs.json", [jobs[i] for i in todo], lengths, workers)
         _say(eta.plan())
-        index = {job: i for i, job in enumerate(jobs)}
-        futures = {pool.submit(evaluate_run, job): index[job] for job in eta.order([jobs[i] for i in todo])}
+        futures = {pool.submit(evaluate_run, jobs[todo[k]]): todo[k] for k in eta.order([jobs[i] for i in todo])}
         for k, fut in enumerate(as_completed(futures), 1):
             outcome = fut.result()
             outcomes[futures[fut]] = outcome
@@ -535,28 +534,28 @@ class Estimate:
         except (OSError, ValueError, KeyError, TypeError):
             pass  # no earlier reproduction: the default rate
         self.ms = {m: sum(v) / len(v) for m, v in measured.items() if v}
-        self.frames = {job: lengths.get(job.path, 0) for job in jobs}
+        self.lengths = lengths
+        self.runs, self.frames = len(jobs), sum(lengths.get(job.path, 0) for job in jobs)
         self.workers = max(workers, 1)
         self.left = sum(self._seconds(job) for job in jobs)
         self.estimated_done = 0.0
         self.t0 = time.perf_counter()
 
     def _seconds(self, job: Job) -> float:
-        return self.frames.get(job, 0) * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
+        return self.lengths.get(job.path, 0) * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
 
-    def order(self, jobs: list[Job]) -> list[Job]:
-        """Submission order: the sequence with the most estimated work first, and within one the
-        longest runs first. A sequence's runs stay together (a worker keeps the frames of the
-        sequence it tracked last) and the short runs come last, where workers would otherwise
-        wait for each other's long ones."""
+    def order(self, jobs: list[Job]) -> list[int]:
+        """Submission order, as positions in ``jobs``: the sequence with the most estimated work
+        first, and within one the longest runs first. A sequence's runs stay together (a worker
+        keeps the frames of the sequence it tracked last) and the short runs come last, where
+        workers would otherwise wait for each other's long ones."""
         total: dict[str, float] = {}
         for job in jobs:
             total[job.path] = total.get(job.path, 0.0) + self._seconds(job)
-        return sorted(jobs, key=lambda j: (-total[j.path], j.path, -self._seconds(j)))
+        return sorted(range(len(jobs)), key=lambda i: (-total[jobs[i].path], jobs[i].path, -self._seconds(jobs[i])))
 
     def plan(self) -> str:
-        frames = sum(self.frames.values())
-        return (f"[plan] {len(self.frames)} runs, {frames} frames to track; about "
+        return (f"[plan] {self.runs} runs, {self.frames} frames to track; about "
                 f"{self.left / self.workers / 60:.0f} min on {self.workers} worker(s) (ms/frame per method "
                 f"from the last reproduction's runs.json, {self.DEFAULT_MS:.0f} ms where none)")
 

@@ -64,11 +64,24 @@ OPENCV_ODOMETRY = _run("opencv-odometry", "opencv-odometry",
                        description="cv2.Odometry RGB-D, frame to frame, as OpenCV's defaults call it (COMMON)")
 OPENCV_FAST = Run("opencv-odometry[fast]", "opencv-odometry", "none", (("algorithm", "fast"),),
                   "cv2.Odometry with OdometryAlgoType_FAST, otherwise the defaults")
-DEPTHCLUSTER = _run("depthcluster", "depthcluster", description="paper A")
+DEPTHCLUSTER = _run("depthcluster", "depthcluster", description="paper A with every addition of ours (default)")
 STATIC_ORB = _run("static-orb", "static-orb", description="no masks (static-orb)")
 WEIGHTEDSTATIC = _run("weightedstatic", "weightedstatic", SEMANTIC,
                       "oracle (synthetic) / person model (real) masks + geometric test + weights")
 BGRESTORE = _run("bgrestore", "bgrestore", SEMANTIC, "paper C with oracle (synthetic) / person model (real) masks")
+
+# paper A's ablation: the paper alone (every addition of ours off), then each addition by itself
+# (the release of explained pixels changes the reported mask only: its columns show it, no run needed)
+_NO_PRIOR, _NO_GROW, _NO_CUT = ("propagate", False), ("outlier.grow", False), ("preremoval.max_region_fraction", 1.0)
+_NO_RELEASE = ("release", False)
+DC_PAPER = Run("depthcluster[paper]", "depthcluster", "none", (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_RELEASE),
+               "paper A only: every addition of ours off")
+DC_PRIOR = Run("depthcluster[paper+prior]", "depthcluster", "none", (_NO_GROW, _NO_CUT, _NO_RELEASE),
+               "+ the previous pair's moving mask as a prior of the first estimate (propagate)")
+DC_GROW = Run("depthcluster[paper+grow]", "depthcluster", "none", (_NO_PRIOR, _NO_CUT, _NO_RELEASE),
+              "+ whole depth-layer regions taken in the background update (outlier.grow)")
+DC_CUT = Run("depthcluster[paper+cut]", "depthcluster", "none", (_NO_PRIOR, _NO_GROW, _NO_RELEASE),
+             "+ pre-removal regions over 25 % of the image cut to the dynamic blocks (max_region_fraction)")
 
 # paper B's ablation: masks alone, then the geometric test and the weights on degraded masks
 STATIC_ORB_ORACLE = _run("static-orb[oracle]", "static-orb", "oracle", "masks only, oracle")
@@ -123,6 +136,7 @@ RUN_SETS = (
     RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),
            scenes=TUM_SCENES),
     RunSet("OpenCV's FAST variant", (OPENCV_FAST,), scenes=("static_xyz", "walking_xyz")),
+    RunSet("paper A ablation", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT), scenes=WALKING),
     RunSet("paper B ablation", (STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, WS_DEGRADED_GEOMETRY, WS_DEGRADED_WEIGHTS,
                                 WS_DEGRADED, WS_NONE), scenes=("walking_xyz", "walking_rpy")),
     RunSet("paper C", (BGRESTORE,), scenes=WALKING),  # paper C's tables cover the walking scenes
@@ -132,8 +146,11 @@ RUN_SETS = (
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
                          STATIC_ORB_PERSON, WS_NONE, BG_NONE), real=True),
+    RunSet("paper A ablation on real data", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT), real=True),
 )
 
+# rows of paper A's ablation table, in order (the default last: every addition on)
+PAPER_A_ABLATION = (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DEPTHCLUSTER)
 # rows of paper B's ablation table, in order
 PAPER_B_ABLATION = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, STATIC_ORB_PERSON, WS_DEGRADED_GEOMETRY,
                     WS_DEGRADED_WEIGHTS, WS_DEGRADED, WEIGHTEDSTATIC, WS_NONE)

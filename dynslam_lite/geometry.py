@@ -15,6 +15,7 @@ Conventions
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -234,8 +235,18 @@ def depth_to_points(camera: PinholeCamera, depth: np.ndarray) -> tuple[np.ndarra
     return backproject(camera, u.astype(float), v.astype(float), depth.reshape(-1)[index]), index
 
 
+@lru_cache(maxsize=8)
+def _normalised_grid(H: int, W: int, fx: float, fy: float, cx: float, cy: float):
+    """(x/z, y/z) of every pixel, float32, read-only (the same for every frame of a camera)."""
+    v, u = np.mgrid[0:H, 0:W].astype(np.float32)
+    xn, yn = (u - cx) / fx, (v - cy) / fy
+    xn.flags.writeable = yn.flags.writeable = False
+    return xn, yn
+
+
 def warp_coordinates(
-    camera: PinholeCamera, depth_ref: np.ndarray, T_cur_ref: np.ndarray
+    camera: PinholeCamera, depth_ref: np.ndarray, T_cur_ref: np.ndarray,
+    pixels: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """w(x, xi): where each reference pixel lands in the current frame.
 
@@ -243,16 +254,21 @@ def warp_coordinates(
     ----------
     depth_ref : (H, W) float32, metres, 0 = invalid
     T_cur_ref : (4, 4), reference-to-current camera transform
+    pixels : optional (u, v) integer columns and rows of some pixels; ``depth_ref`` then holds
+        their depths (same shape) and only they are warped (same arithmetic as the whole image)
     Returns
     -------
-    map_u, map_v : (H, W) float32, pixel coordinates in the current image (NaN where invalid)
-    z_cur : (H, W) float32, depth of the transformed point in the current frame (NaN where invalid)
+    map_u, map_v : float32 (shape of ``depth_ref``), pixel coordinates in the current image
+        (NaN where invalid)
+    z_cur : float32, depth of the transformed point in the current frame (NaN where invalid)
     """
-    H, W = depth_ref.shape
-    v, u = np.mgrid[0:H, 0:W].astype(np.float32)
+    shape = depth_ref.shape if pixels is None else (camera.height, camera.width)
+    xn, yn = _normalised_grid(*shape, camera.fx, camera.fy, camera.cx, camera.cy)
+    if pixels is not None:
+        xn, yn = xn[pixels[1], pixels[0]], yn[pixels[1], pixels[0]]
     z = depth_ref.astype(np.float32)
-    x = (u - camera.cx) / camera.fx * z
-    y = (v - camera.cy) / camera.fy * z
+    x = xn * z
+    y = yn * z
     R = T_cur_ref[:3, :3].astype(np.float32)
     t = T_cur_ref[:3, 3].astype(np.float32)
     X = R[0, 0] * x + R[0, 1] * y + R[0, 2] * z + t[0]
@@ -349,9 +365,9 @@ def depth_pyramid(depth: np.ndarray, levels: int) -> list[np.ndarray]:
         d = pyr[-1]
         H, W = d.shape
         d = d[: H - H % 2, : W - W % 2]
-        blocks = d.reshape(H // 2, 2, W // 2, 2)
-        valid = (blocks > 0).sum(axis=(1, 3))
-        total = blocks.sum(axis=(1, 3))
+        q = (d[0::2, 0::2], d[0::2, 1::2], d[1::2, 0::2], d[1::2, 1::2])  # the 4 pixels of each block
+        total = (q[0] + q[1]) + (q[2] + q[3])
+        valid = sum((x > 0).astype(np.float64) for x in q)
         with np.errstate(divide="ignore", invalid="ignore"):
             pyr.append(np.where(valid > 0, total / np.maximum(valid, 1), 0.0).astype(np.float32))
     return pyr

@@ -35,7 +35,7 @@ def test_runs_per_sequence_follow_the_run_sets():
         "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic", E.OPENCV_FAST.label]
     assert E.OPENCV_FAST not in E.runs_for("synthetic", "sitting_xyz")
     xyz = E.runs_for("synthetic", "walking_xyz")
-    assert len(xyz) == 15 and xyz[-1] is E.BG_ADJACENT and E.BGRESTORE in xyz
+    assert len(xyz) == 19 and xyz[-1] is E.BG_ADJACENT and E.BGRESTORE in xyz
     carry = E.runs_for("synthetic", "walking_carry")
     assert carry == list(E.OBJECT_ROWS) and E.DEPTHCLUSTER not in carry
     real = E.runs_for("real")
@@ -174,3 +174,22 @@ def test_object_scenes_are_labelled_rows_of_papers_b_and_c_and_fill_their_own_ta
     assert [r[2] for r in rows] == [run.label for run in E.OBJECT_ROWS]
     ws = rows[E.OBJECT_ROWS.index(E.WEIGHTEDSTATIC)]
     assert ws[5] == "0.80 / 0.80" and ws[6] == "-"
+
+
+def test_paper_a_ablation_has_the_paper_alone_each_addition_and_the_default_per_sequence():
+    from dynslam_lite import tables
+
+    assert [r.label for r in E.runs_for("synthetic", "walking_rpy") if r.method == "depthcluster"] == [
+        E.DEPTHCLUSTER.label, E.DC_PAPER.label, E.DC_PRIOR.label, E.DC_GROW.label, E.DC_CUT.label]
+    assert E.DC_PAPER in E.runs_for("real") and E.DC_PAPER not in E.runs_for("synthetic", "sitting_xyz")
+    # each addition by itself: its own override missing, the two others kept off
+    offs = {k for k, _ in E.DC_PAPER.params}
+    for run in (E.DC_PRIOR, E.DC_GROW, E.DC_CUT):
+        assert len(offs - {k for k, _ in run.params}) == 1 and ("release", False) in run.params
+    xyz, real = "synthetic/walking_xyz", "real/rgbd_bonn_crowd_dev"
+    recs = [_record(seq, run, 0.01 * (k + 1), {"pixels/final": MaskScores.from_counts(3, 1, 1)})
+            for seq in (real, xyz) for k, run in enumerate(E.PAPER_A_ABLATION)]
+    recs.append(_record(xyz, E.STATIC_ORB, 0.5))
+    header, rows, _ = tables.paper_a_ablation(recs)
+    assert [(r[0], r[2]) for r in rows] == [(s, run.label) for s in (xyz, real) for run in E.PAPER_A_ABLATION]
+    assert rows[0][3] == 0.01 and rows[4][3] == 0.05 and rows[0][10:13] == [0.75, 0.75, 0.6]

@@ -19,8 +19,9 @@ and the tracked keyframe poses, so ``T_cur_kf`` comes from the frontend; noteboo
 paper's F -> E -> (R, t) route beside it.
 
 Vectorised: the projection of every keyframe pixel is one matrix product, the splat is one
-``np.bincount`` per channel over the four corners of every point; a coarse pass on every 8th pixel first finds the part of
-each keyframe's blocks that can land in the hole, so only those are projected at full resolution.
+``np.bincount`` per channel over the four corners of every point; a coarse pass on every 8th
+pixel first finds the part of each keyframe's blocks that can land in the hole, so only those
+are projected at full resolution.
 """
 from __future__ import annotations
 

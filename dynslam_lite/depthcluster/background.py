@@ -7,12 +7,15 @@ pixels still considered static:
 
     tau = max(tau_min, k * 1.4826 * MAD(r_I over static pixels))
 
-(1.4826 * MAD is a robust standard deviation; k = 3 flags about 0.3 % of Gaussian inliers).
+(1.4826 * MAD is a robust standard deviation, taken on every ``mad_stride``-th static pixel;
+k = 3 flags about 0.3 % of Gaussian inliers).
 Isolated outliers from image noise and sub-pixel misalignment of strong edges are removed by a
 3 x 3 morphological opening, and the rest dilated to cover the blurred outline of the object.
 The paper uses the photometric residual only; ``depth_outliers`` adds the depth residual
 ``r_D = D_B(w(x, T)) - [T pi^-1(x)]_z`` with a tolerance growing with depth, for uniformly
 coloured people in front of uniformly coloured walls (off by default, as printed).
+After the last update, :func:`release` (ours) gives back the removed pixels the final pose
+explains, for the reported mask.
 """
 from __future__ import annotations
 
@@ -21,14 +24,15 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..geometry import PinholeCamera, interpolate, warp_coordinates
-from ..imageops import dilate
+from ..geometry import PinholeCamera, warp_coordinates
+from ..imageops import dilate, disk
 from .clustering import grow_to_components
 
 
 @dataclass
 class OutlierConfig:
-    """Parameters of the outlier test (intensities in [0, 1], depth in metres)."""
+    """Parameters of the outlier test (intensities in [0, 1], depth in metres); ``release_*``
+    are those of :func:`release`, ``depth_tol_*`` also its depth agreement."""
 
     k_sigma: float = 3.0
     tau_min: float = 0.06
@@ -40,11 +44,14 @@ class OutlierConfig:
     grow: bool = True
     grow_min_overlap: float = 0.2
     grow_max_area_fraction: float = 0.15
+    mad_stride: int = 4
+    release_open_px: int = 4
+    release_min_outliers: float = 0.1
 
 
 def residuals(
     gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, depth_cur: np.ndarray,
-    camera: PinholeCamera, T_cur_ref: np.ndarray,
+    camera: PinholeCamera, T_cur_ref: np.ndarray, warp: tuple | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Photometric and depth residual images on the reference pixels (NaN where undefined).
 
@@ -52,17 +59,33 @@ def residuals(
     ----------
     gray_ref, gray_cur : (H, W) float32 in [0, 1]
     depth_ref, depth_cur : (H, W) float32 metres
+    warp : ``warp_coordinates(camera, depth_ref, T_cur_ref)`` when the caller has it
     Returns
     -------
     r_I, r_D : (H, W) float32
     """
-    mu, mv, z = warp_coordinates(camera, depth_ref, T_cur_ref)
-    u, v = np.nan_to_num(mu, nan=-1.0).ravel(), np.nan_to_num(mv, nan=-1.0).ravel()
-    s = interpolate(np.dstack([gray_cur, depth_cur]).astype(np.float32), u, v)
-    r_i = (s[:, 0] - gray_ref.ravel()).reshape(gray_ref.shape)
-    d = s[:, 1].reshape(z.shape)
-    r_d = np.where(d > 0, d - z, np.nan).astype(np.float32)
-    return r_i.astype(np.float32), r_d
+    mu, mv, z = warp if warp is not None else warp_coordinates(camera, depth_ref, T_cur_ref)
+    H, W = depth_ref.shape
+    outside = ~((mu >= 0) & (mu <= W - 1) & (mv >= 0) & (mv <= H - 1))  # NaN (no depth) included
+    # the warp is a whole-image map: one remap samples both channels (bilinear, as interpolate)
+    s = cv2.remap(np.dstack([gray_cur, depth_cur]).astype(np.float32), np.where(outside, np.float32(-1), mu),
+                  np.where(outside, np.float32(-1), mv), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    r_i = (s[..., 0] - gray_ref).astype(np.float32, copy=False)
+    r_i[outside] = np.nan
+    d = s[..., 1]
+    with np.errstate(invalid="ignore"):
+        r_d = np.where((d > 0) & ~outside, d - z, np.nan).astype(np.float32)
+    return r_i, r_d
+
+
+def _threshold(r_i: np.ndarray, static: np.ndarray, cfg: OutlierConfig) -> float:
+    """tau of the photometric outlier test from the residuals of the static pixels (NaN: too few)."""
+    ok = np.isfinite(r_i) & static
+    if ok.sum() < 100:
+        return float("nan")
+    sample = r_i[ok][::cfg.mad_stride]  # an evenly strided sample estimates the spread as well
+    mad = float(np.median(np.abs(sample - np.median(sample))))
+    return max(cfg.tau_min, cfg.k_sigma * 1.4826 * mad)
 
 
 def outliers(
@@ -84,13 +107,11 @@ def outliers(
     tau : the photometric threshold used
     """
     cfg = config or OutlierConfig()
+    tau = _threshold(r_i, static, cfg)
+    if not np.isfinite(tau):
+        return np.zeros(r_i.shape, bool), tau
     a = np.abs(r_i)
-    ok = np.isfinite(a) & static
-    if ok.sum() < 100:
-        return np.zeros(r_i.shape, bool), float("nan")
-    mad = float(np.median(np.abs(r_i[ok] - np.median(r_i[ok]))))
-    tau = max(cfg.tau_min, cfg.k_sigma * 1.4826 * mad)
-    out = np.isfinite(a) & (a > tau)
+    out = a > tau  # NaN compares False
     if cfg.depth_outliers:
         tol = cfg.depth_tol_m + cfg.depth_tol_rel * depth_ref
         out |= np.isfinite(r_d) & (np.abs(r_d) > tol)
@@ -103,3 +124,39 @@ def outliers(
         m = grow_to_components(m, comp, areas, cfg.grow_min_overlap, cfg.grow_max_area_fraction * m.size)
     m = dilate(m, cfg.dilate_px)
     return m, tau
+
+
+def release(removed: np.ndarray, r_i: np.ndarray, r_d: np.ndarray, depth_ref: np.ndarray,
+            config: OutlierConfig | None = None, components=None) -> np.ndarray:
+    """The removed pixels that the final pose explains, given back to the background (ours).
+
+    A removed pixel whose photometric residual is below tau and whose depth agrees with the
+    current frame (``depth_tol_m + depth_tol_rel * z``) is static after all: the floor or wall a
+    pre-removal region took with the person. A depth-layer region (``components``) in which at
+    least ``release_min_outliers`` of the pixels are photometric outliers is a moving object and
+    kept whole, so the inner pixels of a person that a frame pair cannot tell from static stay
+    removed, and so do the depth steps between regions (an object's outline); a removed pixel
+    without measured depth (no residual) follows its region. An opening by a disk of
+    ``release_open_px`` keeps specks removed.
+
+    Returns
+    -------
+    (H, W) bool, the moving-object mask (``removed`` minus the released pixels)
+    """
+    cfg = config or OutlierConfig()
+    tau = _threshold(r_i, (depth_ref > 0) & ~removed, cfg)
+    if not np.isfinite(tau):
+        return removed
+    with np.errstate(invalid="ignore"):
+        a = np.abs(r_i)
+        inlier = removed & (a <= tau) & (np.abs(r_d) <= cfg.depth_tol_m + cfg.depth_tol_rel * depth_ref)
+        if components is not None:
+            comp, areas = components
+            hit = np.bincount(comp[a > tau], minlength=areas.size)
+            moving = hit >= cfg.release_min_outliers * np.maximum(areas, 1)
+            moving[0] = True  # depth steps (no region): an object's outline stays removed
+            # no measured depth, no residual: such a pixel follows its (hole-filled) region
+            inlier |= removed & (depth_ref <= 0)
+            inlier &= ~moving[comp]
+    inlier = cv2.morphologyEx(inlier.astype(np.uint8), cv2.MORPH_OPEN, disk(cfg.release_open_px)) > 0
+    return removed & ~inlier

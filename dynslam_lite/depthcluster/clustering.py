@@ -74,22 +74,26 @@ def fill_holes(depth: np.ndarray) -> np.ndarray:
 def fill_edge_zeros(depth: np.ndarray, max_edge_run: int = 12) -> np.ndarray:
     """Fill zero runs of at most ``max_edge_run`` pixels from the nearest valid pixel to the right.
 
-    Longer runs (a real hole, not an edge shadow) stay zero. Vectorised per row: the next valid
-    pixel to the right is a reversed running minimum of column indices, the previous one to the
-    left a running maximum.
+    Longer runs (a real hole, not an edge shadow) and runs reaching the right border stay zero.
+    Vectorised over the zero runs: each row is framed by a valid column on both sides, so a run
+    of the flattened image never crosses rows, and a run is where the validity steps down then up.
     """
     z = depth.astype(np.float32)
     H, W = z.shape
-    valid = z > 0
-    cols = np.broadcast_to(np.arange(W), (H, W))
-    nxt = np.where(valid, cols, W)
-    nxt = np.minimum.accumulate(nxt[:, ::-1], axis=1)[:, ::-1]  # next valid column to the right
-    prev = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)  # last valid to the left
-    run = nxt - prev - 1  # length of the zero run each pixel belongs to
-    ok = ~valid & (nxt < W) & (run <= max_edge_run)
+    valid = np.ones((H, W + 2), np.int8)  # columns 0 and W + 1: the frame
+    valid[:, 1:-1] = z > 0
+    step = np.diff(valid.ravel())
+    starts = np.flatnonzero(step == -1) + 1  # first zero of each run (framed flat index)
+    ends = np.flatnonzero(step == 1) + 1  # the valid pixel right after it
+    keep = (ends - starts <= max_edge_run) & (ends % (W + 2) <= W)  # a real pixel on the right
+    starts, ends = starts[keep], ends[keep]
     out = z.copy()
-    rows = np.nonzero(ok)[0]
-    out[ok] = z[rows, nxt[ok]]
+    if starts.size == 0:
+        return out
+    n = ends - starts
+    idx = np.repeat(ends - n.cumsum(), n) + np.arange(n.sum())  # every pixel of the kept runs
+    flat_src = ends - (ends // (W + 2)) * 2 - 1  # framed -> image flat index: row * W + col - 1
+    out.reshape(-1)[idx - (idx // (W + 2)) * 2 - 1] = np.repeat(z.reshape(-1)[flat_src], n)
     return out
 
 
@@ -128,7 +132,9 @@ class DepthClusters:
 def assign(depth: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """Nearest-centre layer of every pixel (-1 where depth is 0); centres sorted increasing."""
     edges = 0.5 * (centres[1:] + centres[:-1])
-    labels = np.searchsorted(edges, depth).astype(np.int32)
+    labels = np.zeros(depth.shape, np.int32)
+    for e in edges:  # the number of boundaries below each depth (what searchsorted gives)
+        labels += depth > e
     labels[depth <= 0] = -1
     return labels
 

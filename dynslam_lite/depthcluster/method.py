@@ -8,6 +8,11 @@ For a reference frame A and the current frame B (paper fig. 1):
    pixels of A (:func:`dynslam_lite.odometry.dense.align` with ``mask_ref``);
 4. background update (:mod:`.background`): residual outliers of the pose leave the static set,
    the pose is re-estimated from the previous one, ``update_iterations`` times (7 in the paper).
+
+Ours, each measured in ``tables/paper_a_ablation.md``: the previous pair's mask as a prior of the
+first estimate (``propagate``), whole depth-layer regions in the update (``outlier.grow``), the
+cut of oversized pre-removal regions (``preremoval.max_region_fraction``), and a last release of
+the removed pixels the final pose explains (``release``: the reported mask, not the pose).
 """
 from __future__ import annotations
 
@@ -23,7 +28,7 @@ from ..geometry import PinholeCamera, rotation_angle_deg, warp_coordinates
 from ..odometry.dense import DenseConfig, align
 from ..tracking import Labels, Method, Tracked
 from ..imageops import disk
-from .background import OutlierConfig, outliers, residuals
+from .background import OutlierConfig, outliers, release, residuals
 from .clustering import DepthClusters, cluster_depth, layer_components
 from .preremoval import PreRemoval, PreRemovalConfig, pre_remove
 
@@ -46,14 +51,18 @@ class DepthClusterConfig:
     outlier : the residual test of step 4, see :class:`OutlierConfig`
     accumulate : removed pixels stay removed in later iterations (the paper's reading: each
         iteration "removes part of the moving objects again"); False re-derives them each time
-    stable_fraction : stop early when an update changes fewer than this fraction of the pixels
-        and the pose by less than 0.1 mm / 0.01 deg (the paper sees convergence after ~4); 0 runs
-        all iterations
+    stable_fraction : stop early when an update would change fewer than this fraction of the
+        pixels (no new estimate is made), or changed them and the pose by less than
+        0.1 mm / 0.01 deg (the paper sees convergence after ~4); 0 runs all iterations
     min_static_fraction : fewer static pixels than this (fraction of valid depth) = the update
         is rejected and the previous estimate kept
     propagate : the runner carries the moving mask of each pair into the next reference frame
         as a prior for the first estimate (:func:`propagate_mask`); not in the paper, which treats
         each pair on its own: a person walking slowly gives the depth test little to see
+    release : the reported moving mask is the pose's mask less the pixels the final pose explains
+        (:func:`.background.release`; ours): pre-removal and the update must over-remove for the
+        pose (a wall sharing the person's layer, the blurred outline), the reader should see the
+        person removed, not the floor. The pose and the prior keep the unreleased mask.
     """
 
     n_clusters: int = 0
@@ -69,6 +78,7 @@ class DepthClusterConfig:
     stable_fraction: float = 0.002
     min_static_fraction: float = 0.15
     propagate: bool = True
+    release: bool = True
 
 
 @dataclass
@@ -105,6 +115,9 @@ class PairResult:
     preremoval : the block test (None when skipped)
     iterations : every pose estimate, first one first
     moving : (H, W) bool, final moving-object mask on the reference pixels
+    excluded : (H, W) bool, the reference pixels the final pose was estimated without (``moving``
+        plus what the release gave back; the same as ``moving`` without release)
+    warp : ``warp_coordinates`` of the reference depth under the final pose, when computed
     """
 
     T_cur_ref: np.ndarray
@@ -114,6 +127,8 @@ class PairResult:
     preremoval: PreRemoval | None
     iterations: list[Iteration]
     moving: np.ndarray
+    excluded: np.ndarray
+    warp: tuple | None = None
 
 
 def _layers(depth: np.ndarray, cfg: DepthClusterConfig) -> DepthClusters:
@@ -178,17 +193,20 @@ def estimate_pair(
     its: list[Iteration] = []
     if not r.ok:
         its.append(Iteration(r.T_cur_ref, removed, None, float("nan"), 0.0, False, r.reason))
-        return PairResult(r.T_cur_ref, False, r.reason, clusters_ref, pre, its, removed)
+        return PairResult(r.T_cur_ref, False, r.reason, clusters_ref, pre, its, removed, removed)
     T = r.T_cur_ref
     refine = dataclasses.replace(cfg.dense, levels=min(cfg.refine_levels, cfg.dense.levels),
                                  iterations=cfg.dense.iterations[-min(cfg.refine_levels, cfg.dense.levels):])
     comps = layer_components(clusters_ref) if cfg.outlier.grow else None
+    last: tuple = (None,)  # (pose, r_I, r_D, warp) of the latest residual images
     for k in range(cfg.update_iterations + 1):
         if k == cfg.update_iterations and not record:
             its.append(Iteration(T, removed, None, float("nan"), static_fraction(removed), True))
             break
         with stage(f"update_{k + 1}"):
-            r_i, r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T)
+            warp = warp_coordinates(camera, depth_ref, T)
+            r_i, r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp)
+            last = (T, r_i, r_d, warp)
             out, tau = outliers(r_i, r_d, depth_ref, valid & ~removed, cfg.outlier, comps)
         its.append(Iteration(T, removed, r_i if record else None, tau, static_fraction(removed), True))
         if k == cfg.update_iterations:
@@ -197,34 +215,52 @@ def estimate_pair(
         if static_fraction(new_removed) < cfg.min_static_fraction:
             its[-1].reason = "update rejected: too few static pixels left"
             break
+        changed = np.count_nonzero(new_removed != removed) / removed.size
+        if cfg.stable_fraction > 0 and changed < cfg.stable_fraction:
+            # the mask is stable: an estimate on nearly the same pixels from the same pose
+            # would not move, so it is not computed
+            its[-1].reason = "converged"
+            removed = new_removed
+            break
         with stage(f"update_{k + 1}"):
             rr = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, ~new_removed, refine, shared)
         if not rr.ok:
             its[-1].reason = f"update rejected: {rr.reason}"
             break
-        changed = np.count_nonzero(new_removed != removed) / removed.size
         dT = np.linalg.inv(T) @ rr.T_cur_ref
         small = np.linalg.norm(dT[:3, 3]) < 1e-4 and rotation_angle_deg(dT[:3, :3]) < 0.01
         T, removed = rr.T_cur_ref, new_removed
         if cfg.stable_fraction > 0 and changed < cfg.stable_fraction and small:
             its.append(Iteration(T, removed, None, tau, static_fraction(removed), True, "converged"))
             break
-    return PairResult(T, True, "", clusters_ref, pre, its, removed)
+    moving = removed
+    if cfg.release:
+        with stage("release"):
+            if last[0] is not T:  # the pose moved since the last residuals
+                warp = warp_coordinates(camera, depth_ref, T)
+                last = (T, *residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp), warp)
+            moving = release(removed, last[1], last[2], depth_ref, cfg.outlier,
+                             comps if comps is not None else layer_components(clusters_ref))
+    return PairResult(T, True, "", clusters_ref, pre, its, moving, removed, last[3] if last[0] is T else None)
 
 
 def propagate_mask(moving: np.ndarray, depth_ref: np.ndarray, camera: PinholeCamera,
-                   T_cur_ref: np.ndarray, close_px: int = 5) -> np.ndarray:
+                   T_cur_ref: np.ndarray, close_px: int = 5, warp: tuple | None = None) -> np.ndarray:
     """Moving pixels of the reference frame carried into the current frame with the pose.
 
     Each moving pixel with depth is projected into the current image (nearest pixel); the
     scattered result is closed morphologically. Objects move a few pixels between frames, so
-    this is a prior for the next pair, not a mask.
+    this is a prior for the next pair, not a mask. ``warp``: the whole image's
+    ``warp_coordinates`` under ``T_cur_ref`` when the caller has it.
     """
-    mu, mv, _ = warp_coordinates(camera, np.where(moving, depth_ref, 0).astype(np.float32), T_cur_ref)
-    ok = np.isfinite(mu)
-    u = np.rint(mu[ok]).astype(int)
-    v = np.rint(mv[ok]).astype(int)
     H, W = moving.shape
+    if warp is not None:
+        mu, mv = warp[0][moving], warp[1][moving]
+    else:
+        v, u = np.nonzero(moving & (depth_ref > 0))  # only the moving pixels
+        mu, mv, _ = warp_coordinates(camera, depth_ref[v, u], T_cur_ref, (u, v))
+    ok = np.isfinite(mu)
+    u, v = np.rint(mu[ok]).astype(int), np.rint(mv[ok]).astype(int)
     inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
     out = np.zeros((H, W), np.uint8)
     out[v[inside], u[inside]] = 1
@@ -237,7 +273,8 @@ class DepthClusterMethod(Method):
 
     Clusters every frame once (the current frame's layers are the next pair's reference
     layers). Each pair's labels are the final moving mask and the pre-removal mask of the
-    reference frame ('final', 'preremoval'); its detail is the :class:`PairResult`.
+    reference frame ('final', 'preremoval', and 'pose': what the pose was estimated without); its
+    detail is the :class:`PairResult`.
     """
 
     name = "depthcluster"
@@ -248,7 +285,7 @@ class DepthClusterMethod(Method):
         self._cache: tuple[float, DepthClusters] | None = None
         self._prior: tuple[float, np.ndarray] | None = None
         self.iterations_used: list[int] = []
-        self.area = np.zeros(2)  # sums over pairs of the removed fraction: pre-removal, final
+        self.area = np.zeros(3)  # sums over pairs of the removed fraction: pre-removal, final, pose
 
     def _clusters(self, frame) -> DepthClusters:
         if self._cache is not None and self._cache[0] == frame.timestamp:
@@ -269,19 +306,22 @@ class DepthClusterMethod(Method):
                             self.config, c_ref, c_cur.filled, prior, timer=timer)
         if self.config.propagate and res.ok:
             with timer.stage("propagate"):
-                self._prior = (cur.timestamp, propagate_mask(res.moving, ref.depth, self.camera,
-                                                             res.T_cur_ref))
+                self._prior = (cur.timestamp, propagate_mask(res.excluded, ref.depth, self.camera,
+                                                             res.T_cur_ref, warp=res.warp))
         self.iterations_used.append(len(res.iterations) - 1)
-        self.area += [0.0 if res.preremoval is None else res.preremoval.mask.mean(), res.moving.mean()]
-        labels = Labels(ref.index, {"final": res.moving})
+        self.area += [0.0 if res.preremoval is None else res.preremoval.mask.mean(), res.moving.mean(),
+                      res.excluded.mean()]
+        labels = Labels(ref.index, {"final": res.moving, "pose": res.excluded})
         if res.preremoval is not None:
             labels.masks["preremoval"] = res.preremoval.mask
         return Tracked(res.T_cur_ref, res.ok, res.reason, labels=labels, detail=res)
 
     def extras(self) -> dict:
-        """Mean background updates per pair, and the mean fraction of the reference pixels
-        removed by pre-removal and in the end (whether or not anything moves)."""
+        """Mean background updates (re-estimates) per pair, and the mean fraction of the reference
+        pixels removed by pre-removal, excluded from the pose, and reported as moving in the end
+        (whether or not anything moves)."""
         n = max(len(self.iterations_used), 1)
         return {"mean_updates": float(np.mean(self.iterations_used)) if self.iterations_used else 0.0,
-                "removed_area_preremoval": float(self.area[0] / n), "removed_area_final": float(self.area[1] / n)}
+                "removed_area_preremoval": float(self.area[0] / n), "removed_area_final": float(self.area[1] / n),
+                "removed_area_pose": float(self.area[2] / n)}
 

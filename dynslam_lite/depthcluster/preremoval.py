@@ -30,6 +30,7 @@ sitting_halfsphere.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -84,20 +85,22 @@ class PreRemoval:
         return slice(r * bh, (r + 1) * bh), slice(c * bw, (c + 1) * bw)
 
 
+@lru_cache(maxsize=4)
 def _block_ids(shape: tuple[int, int], rows: int, cols: int) -> np.ndarray:
     H, W = shape
     bh, bw = H // rows, W // cols
     r = np.minimum(np.arange(H) // bh, rows - 1)
     c = np.minimum(np.arange(W) // bw, cols - 1)
-    return (r[:, None] * cols + c[None, :]).astype(np.int64)
+    ids = (r[:, None] * cols + c[None, :]).astype(np.int64)
+    ids.flags.writeable = False
+    return ids
 
 
 def _layer_stats(block: np.ndarray, labels: np.ndarray, depth: np.ndarray, K: int, n: int):
     """Per (block, layer): pixel count and mean depth, as (K, n) arrays."""
-    ok = labels >= 0
-    key = block[ok] * n + labels[ok]
-    count = np.bincount(key, minlength=K * n).reshape(K, n).astype(float)
-    total = np.bincount(key, weights=depth[ok], minlength=K * n).reshape(K, n)
+    key = (block * (n + 1) + (labels + 1)).ravel()  # column 0 of each block: no layer (-1)
+    count = np.bincount(key, minlength=K * (n + 1)).reshape(K, n + 1)[:, 1:].astype(float)
+    total = np.bincount(key, weights=depth.ravel(), minlength=K * (n + 1)).reshape(K, n + 1)[:, 1:]
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(count > 0, total / np.maximum(count, 1), np.nan)
     return count, mean
@@ -167,9 +170,11 @@ def _remove_regions(labels, block, dynamic, moving, cfg: PreRemovalConfig) -> np
         area = stats[:, cv2.CC_STAT_AREA]
         blocks = np.flatnonzero(dynamic & (moving == layer))
         # per dynamic block, the largest component of this layer inside it
-        sel = np.isin(block, blocks) & (cc > 0)
+        in_blocks = np.zeros(dynamic.size, bool)
+        in_blocks[blocks] = True
+        sel = in_blocks[block] & (cc > 0)
         keys = block[sel] * n_cc + cc[sel]
-        uniq = np.unique(keys)
+        uniq = np.flatnonzero(np.bincount(keys))  # the (block, component) pairs present, sorted
         b_of, c_of = np.divmod(uniq, n_cc)
         best = {}
         for b, c in zip(b_of, c_of):

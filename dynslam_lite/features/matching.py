@@ -40,14 +40,14 @@ def search_by_projection(uv_proj: np.ndarray, desc: np.ndarray, feats: Features,
     # the pairs within the largest window (k-d trees, Chebyshev distance), then each keypoint's own
     pairs = cKDTree(uv_proj).sparse_distance_matrix(cKDTree(feats.uv), float(r.max()) + 1.0, p=np.inf,
                                                     output_type="ndarray")
-    i, j = pairs["i"], pairs["j"]
-    inside = (np.abs(uv_proj[i, 0] - feats.uv[j, 0]) <= r[j]) & (np.abs(uv_proj[i, 1] - feats.uv[j, 1]) <= r[j])
-    i, j = i[inside], j[inside]
-    if i.size == 0:
+    pt, kp = pairs["i"], pairs["j"]  # map point, keypoint
+    inside = (np.abs(uv_proj[pt, 0] - feats.uv[kp, 0]) <= r[kp]) & (np.abs(uv_proj[pt, 1] - feats.uv[kp, 1]) <= r[kp])
+    pt, kp = pt[inside], kp[inside]
+    if pt.size == 0:
         return np.zeros(0, int), np.zeros(0, int)
-    rows, row_of = np.unique(i, return_inverse=True)  # map points with a keypoint in their window
+    rows, row_of = np.unique(pt, return_inverse=True)  # map points with a keypoint in their window
     window = np.zeros((rows.size, len(feats)), np.uint8)
-    window[row_of, j] = 1
+    window[row_of, kp] = 1
     knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc[rows], feats.desc, k=2, mask=window)
     q, t, d = [], [], []
     for i, m in enumerate(knn):

@@ -105,7 +105,7 @@ def _geometric_jacobian(g_u, g_v, P, cam: PinholeCamera) -> np.ndarray:
     a = g_u * cam.fx * iz
     b = g_v * cam.fy * iz
     c = -(a * X + b * Y) * iz
-    return np.stack([a, b, c, Y * c - Z * b, Z * a - X * c, X * b - Y * a]).astype(np.float32)
+    return np.stack([a, b, c, Y * c - Z * b, Z * a - X * c, X * b - Y * a]).astype(np.float32, copy=False)
 
 
 class _Level:
@@ -178,6 +178,7 @@ def align(
         mref = image_pyramid(mask_ref.astype(np.float32), cfg.levels)
     history: list[list[float]] = []
     valid_pixels = 0
+    ones = np.ones(7, np.float32)
     iters = list(cfg.iterations) + [cfg.iterations[-1]] * max(0, cfg.levels - len(cfg.iterations))
     for level in range(cfg.levels - 1, cfg.finest_level - 1, -1):
         cam = camera.scaled(level)
@@ -212,19 +213,14 @@ def align(
                 return DenseResult(T_prev, False, f"only {idx.size} pixels overlap at level {level}",
                                    idx.size, history + [costs])
             s = interpolate(cur.stack, pu[idx], pv[idx])
-            finite = np.isfinite(s).all(axis=1)
-            idx, s = idx[finite], s[finite]
-            Pi = P[:, idx]
+            finite = np.isfinite(s @ ones)  # a non-finite channel makes the row sum non-finite
+            if not finite.all():
+                idx, s = idx[finite], s[finite]
             r_I = s[:, 0] - I_ref[idx]
-            J_I = _geometric_jacobian(s[:, 1], s[:, 2], Pi, cam)
             w_I = _huber_weights(r_I, cfg.huber_intensity)
             dok = (s[:, 6] > 0.999) & (s[:, 3] > 0)
-            Pd = Pi[:, dok]
-            r_D = (s[dok, 3] - Pd[2]).astype(np.float32)
-            J_D = _geometric_jacobian(s[dok, 4], s[dok, 5], Pd, cam)
-            J_D[2] -= 1.0  # minus d(Z')/d(delta): translation (0, 0, 1), rotation (Y, -X, 0)
-            J_D[3] -= Pd[1]
-            J_D[4] += Pd[0]
+            Z = P[2, idx]
+            r_D = (s[dok, 3] - Z[dok]).astype(np.float32)
             w_D = _huber_weights(r_D, cfg.huber_depth_m) * np.float32(cfg.lambda_depth)
             cost = float(np.sum(w_I * r_I**2) + np.sum(w_D * r_D**2)) / idx.size
             if not np.isfinite(cost):
@@ -235,6 +231,14 @@ def align(
             costs.append(cost)
             prev_cost = cost
             valid_pixels = idx.size
+            # Jacobians only for an accepted pose (a rejected step ends the level)
+            Pi = np.take(P, idx, axis=1)
+            J_I = _geometric_jacobian(s[:, 1], s[:, 2], Pi, cam)
+            Pd = Pi[:, dok]
+            J_D = _geometric_jacobian(s[dok, 4], s[dok, 5], Pd, cam)
+            J_D[2] -= 1.0  # minus d(Z')/d(delta): translation (0, 0, 1), rotation (Y, -X, 0)
+            J_D[3] -= Pd[1]
+            J_D[4] += Pd[0]
             JwI = J_I * w_I
             JwD = J_D * w_D
             H = JwI @ J_I.T + JwD @ J_D.T

@@ -2,8 +2,8 @@
 
 Called as OpenCV's documentation shows it by default: ``OdometryType_RGB_DEPTH`` with
 ``OdometryAlgoType_COMMON``, depth in metres and the default ``cv2.OdometrySettings`` (the
-values of :class:`OpenCVOdometryConfig`). ``algorithm="fast"`` (a labelled run of the registry, :data:`dynslam_lite.experiments.OPENCV_FAST`)
-is OpenCV's FAST variant. Notes on OpenCV 5.0's Python binding, measured here:
+values of :class:`OpenCVOdometryConfig`). ``algorithm="fast"`` is OpenCV's FAST variant (a
+labelled run of the registry, :data:`dynslam_lite.experiments.OPENCV_FAST`). Notes on OpenCV 5.0's Python binding, measured here:
 
 - FAST divides the depth by 5000 internally (the TUM scale): it is given depth and the metric
   settings in TUM units (metres * 5000) and returns metres. Given metres it returns translations
