@@ -109,12 +109,17 @@ def flood_region(gray: np.ndarray, seed: tuple[int, int], td: int, allowed: np.n
     """The final region of :func:`grow_region` in one call: ``cv2.floodFill`` with a floating
     range (each new pixel within ``td`` of a neighbour already in the region), 8-connected,
     restricted to ``allowed`` (which holds the [T0, T1) test)."""
+    return _flood(gray, seed, td, allowed)[0]
+
+
+def _flood(gray, seed, td, allowed):
+    """:func:`flood_region` and the region's bounding box (row0, row1, col0, col1)."""
     H, W = gray.shape
     barrier = np.ones((H + 2, W + 2), np.uint8)  # floodFill's mask: non-zero = never filled
     barrier[1:-1, 1:-1] = ~allowed
     flags = 8 | cv2.FLOODFILL_MASK_ONLY | (2 << 8)
-    cv2.floodFill(gray.copy(), barrier, (int(seed[1]), int(seed[0])), 0, td, td, flags)
-    return barrier[1:-1, 1:-1] == 2
+    _, _, _, (x, y, w, h) = cv2.floodFill(gray.copy(), barrier, (int(seed[1]), int(seed[0])), 0, td, td, flags)
+    return barrier[1:-1, 1:-1] == 2, (y, y + h, x, x + w)
 
 
 @dataclass
@@ -172,23 +177,39 @@ def fill_crop(gray: np.ndarray, hole: np.ndarray, known: np.ndarray, t0: int, t1
     Returns the grey values (float, hole pixels filled where reached), the filled hole pixels,
     and the seeds (row, col).
     """
+    H, W = gray.shape
     out = gray.astype(np.float32)
     src = known & (gray >= t0) & (gray < t1)  # class C1, the depth to restore
     todo = hole.copy()
     seeds: list[tuple[int, int]] = []
     k8 = KERNEL8.astype(np.float32)
-    while todo.any() and src.any() and len(seeds) < max_seeds:
-        target = np.argwhere(todo).mean(axis=0)  # the centroid of what is left
-        cand = np.argwhere(src)
-        seed = tuple(int(c) for c in cand[np.argmin(np.hypot(*(cand - target).T))])
+    # the seed candidates (row-major flat indices and coordinates); those a region took are dropped
+    cand = np.flatnonzero(src)
+    cand_r, cand_c = np.divmod(cand, W)
+    n_todo = -1
+    while todo.any() and cand.size and len(seeds) < max_seeds:
+        if np.count_nonzero(todo) != n_todo:  # the centroid of what is left (exact: integer sums)
+            n_todo = np.count_nonzero(todo)
+            target = np.array([todo.sum(axis=1) @ np.arange(H), todo.sum(axis=0) @ np.arange(W)]) / n_todo
+        i = np.argmin(np.hypot(cand_r - target[0], cand_c - target[1]))
+        seed = (int(cand_r[i]), int(cand_c[i]))
         seeds.append(seed)
-        region = flood_region(gray, seed, td, allowed=src)
+        region, (a0, a1, b0, b1) = _flood(gray, seed, td, src)
         src &= ~region  # the next seed comes from another region
-        # the hole pixels touching the region take the mean of their region neighbours
-        total = cv2.filter2D(out * region, -1, k8, borderType=cv2.BORDER_CONSTANT)
-        count = cv2.filter2D(region.astype(np.float32), -1, k8, borderType=cv2.BORDER_CONSTANT)
-        layer = todo & (count > 0)
-        out[layer] = total[layer] / count[layer]
+        left = ~region.ravel()[cand]
+        cand, cand_r, cand_c = cand[left], cand_r[left], cand_c[left]
+        # the hole pixels touching the region take the mean of their region neighbours; only
+        # the region's box widened by one pixel can be touched
+        a0, a1, b0, b1 = max(a0 - 1, 0), min(a1 + 1, H), max(b0 - 1, 0), min(b1 + 1, W)
+        box = (slice(a0, a1), slice(b0, b1))
+        count = cv2.filter2D(region[box].astype(np.float32), -1, k8, borderType=cv2.BORDER_CONSTANT)
+        layer_box = todo[box] & (count > 0)
+        if not layer_box.any():
+            continue
+        total = cv2.filter2D(out[box] * region[box], -1, k8, borderType=cv2.BORDER_CONSTANT)
+        out[box][layer_box] = total[layer_box] / count[layer_box]
+        layer = np.zeros_like(todo)
+        layer[box] = layer_box
         todo &= ~layer
         _fill_layers(out, todo, layer)
     return out, hole & ~todo, seeds
@@ -209,16 +230,19 @@ def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
     values = np.zeros((H + 2) * Wp, np.float32)
     values.reshape(H + 2, Wp)[1:-1, 1:-1] = out
     shifts = np.array([dy * Wp + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
+    total, count = np.zeros_like(values, np.float64), np.zeros_like(values, np.float64)
     front = np.flatnonzero(np.pad(layer, 1).ravel())
     while front.size:
         target = (front[None, :] + shifts[:, None]).ravel()
-        src = np.tile(front, len(shifts))
         keep = open_[target]
         if not keep.any():
             break
-        target, src = target[keep], src[keep]
-        front, slot = np.unique(target, return_inverse=True)
-        values[front] = (np.bincount(slot, values[src]) / np.bincount(slot)).astype(np.float32)
+        target, src = target[keep], np.tile(front, len(shifts))[keep]
+        np.add.at(total, target, values[src])  # sums in the order of the entries, as bincount
+        np.add.at(count, target, 1.0)
+        front = np.unique(target)
+        values[front] = (total[front] / count[front]).astype(np.float32)
+        total[front] = count[front] = 0.0
         open_[front] = False
     out[:] = values.reshape(H + 2, Wp)[1:-1, 1:-1]
     todo[:] = open_.reshape(H + 2, Wp)[1:-1, 1:-1]

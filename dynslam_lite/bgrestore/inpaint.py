@@ -19,13 +19,14 @@ and the tracked keyframe poses, so ``T_cur_kf`` comes from the frontend; noteboo
 paper's F -> E -> (R, t) route beside it.
 
 Vectorised: the projection of every keyframe pixel is one matrix product, the splat is one
-``np.bincount`` per channel over the four corners of every point; a coarse pass on every 8th
-pixel first finds the part of each keyframe's blocks that can land in the hole, so only those
-are projected at full resolution.
+``np.bincount`` per channel over the four corners of every point, on the hole's bounding box; a
+coarse pass on every 8th pixel first finds the part of each keyframe's blocks that can land in
+the hole, so only those are projected at full resolution.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -77,29 +78,48 @@ def _bbox(mask: np.ndarray) -> tuple[int, int, int, int] | None:
 def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, use: np.ndarray | None = None,
              step: int = 1):
     """Keyframe pixels with depth, outside ``kf.invalid`` (and inside ``use`` where given), every
-    ``step``-th row and column, moved into the current camera: (x, y, depth there, u, v)."""
-    r0, c0 = 0, 0
+    ``step``-th row and column, moved into the current camera: (x, y, depth there, flat index
+    ``v * W + u`` of the keyframe pixel), in row-major order of the keyframe pixels."""
+    H, W = kf.depth.shape
+    r0 = 0
     if use is None:
         z = kf.depth[::step, ::step]
         ok = (z > 0) & ~kf.invalid[::step, ::step]
-    else:  # only the bounding box of ``use`` is searched (the same pixels, in the same order)
-        box = _bbox(use)
-        if box is None:
+    else:  # only the rows of ``use`` are searched (the same pixels, in the same order)
+        rows = np.flatnonzero(use.any(axis=1))
+        if not rows.size:
             none = np.zeros(0, np.float32)
-            return none, none, none, none.astype(np.int64), none.astype(np.int64)
-        r0, r1, c0, c1 = box
-        z = kf.depth[r0:r1, c0:c1]
-        ok = (z > 0) & ~kf.invalid[r0:r1, c0:c1] & use[r0:r1, c0:c1]
-    v, u = np.nonzero(ok)
-    z = z[v, u].astype(np.float32)
-    v, u = v * step + r0, u * step + c0
-    P = backproject(camera, u.astype(np.float32), v.astype(np.float32), z)
-    Pc = P @ T_cur_kf[:3, :3].T.astype(np.float32) + T_cur_kf[:3, 3].astype(np.float32)
+            return none, none, none, none.astype(np.int64)
+        r0, r1 = rows[0], rows[-1] + 1
+        z = kf.depth[r0:r1]
+        ok = (z > 0) & ~kf.invalid[r0:r1] & use[r0:r1]
+    w = ok.shape[1]
+    flat = np.flatnonzero(ok)
+    z = np.take(np.ascontiguousarray(z).ravel(), flat).astype(np.float32, copy=False)
+    v, u = np.divmod(flat, w)
+    v, u = v * step + r0, u * step
+    # pi^-1 as in geometry.backproject, its per-column and per-row factors looked up
+    P = np.empty((flat.size, 3), np.float32)
+    P[:, 0] = _ray_factor(W, camera.cx, camera.fx)[u] * z
+    P[:, 1] = _ray_factor(H, camera.cy, camera.fy)[v] * z
+    P[:, 2] = z
+    Pc = P @ T_cur_kf[:3, :3].T.astype(np.float32)
+    Pc += T_cur_kf[:3, 3].astype(np.float32)
+    index = v * W + u
     front = Pc[:, 2] > 0.05
-    Pc, u, v = Pc[front], u[front], v[front]
+    if not front.all():
+        Pc, index = Pc[front], index[front]
     x = camera.fx * Pc[:, 0] / Pc[:, 2] + camera.cx
     y = camera.fy * Pc[:, 1] / Pc[:, 2] + camera.cy
-    return x, y, Pc[:, 2], u, v
+    return x, y, Pc[:, 2], index
+
+
+@lru_cache(maxsize=8)
+def _ray_factor(n: int, c: float, f: float) -> np.ndarray:
+    """``(i - c) / f`` for the pixel coordinates i = 0..n-1, float32 (read-only)."""
+    out = (np.arange(n, dtype=np.float32) - c) / f
+    out.flags.writeable = False
+    return out
 
 
 def _candidates(camera, kf, T_cur_kf, reach: np.ndarray, coarse: int = 8) -> np.ndarray | None:
@@ -108,14 +128,15 @@ def _candidates(camera, kf, T_cur_kf, reach: np.ndarray, coarse: int = 8) -> np.
     in ``reach`` (the hole widened by a margin), and so are its 8 neighbour blocks. None: no
     sample lands there."""
     H, W = reach.shape
-    x, y, _, u, v = _project(camera, kf, T_cur_kf, None, coarse)
+    x, y, _, index = _project(camera, kf, T_cur_kf, None, coarse)
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     hit = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
     hit[hit] = reach[yi[hit], xi[hit]]
     if not hit.any():
         return None
+    v, u = np.divmod(index[hit], W)
     blocks = np.zeros((-(-H // coarse), -(-W // coarse)), np.uint8)
-    blocks[v[hit] // coarse, u[hit] // coarse] = 1
+    blocks[v // coarse, u // coarse] = 1
     blocks = cv2.dilate(blocks, np.ones((3, 3), np.uint8))
     return np.repeat(np.repeat(blocks, coarse, 0), coarse, 1)[:H, :W].astype(bool)
 
@@ -124,25 +145,53 @@ def splat(x: np.ndarray, y: np.ndarray, values: np.ndarray, hole: np.ndarray) ->
     """Eq. 8-9 accumulation: (sum of w * value (H, W, C), sum of w (H, W)) over the hole pixels.
 
     ``values`` (N, C). Each point spreads over the 4 pixel centres around (x, y) with the
-    unit-square overlap areas; only centres inside ``hole`` receive anything. Points must lie
-    in [-1, W) x [-1, H). The sums run on a grid padded by one pixel (centres just outside the
-    image take what falls there) with one ``np.bincount`` per channel.
+    unit-square overlap areas; only centres inside ``hole`` receive anything.
     """
     H, W = hole.shape
-    W2 = W + 2
+    acc, wsum = np.zeros((H, W, values.shape[1])), np.zeros((H, W))
+    box = _bbox(hole)
+    if box is not None:
+        r0, r1, c0, c1 = box
+        a, w = _splat_box(x, y, values.T, box)
+        crop = hole[r0:r1, c0:c1]
+        acc[r0:r1, c0:c1], wsum[r0:r1, c0:c1] = np.moveaxis(a, 0, -1) * crop[..., None], w * crop
+    return acc, wsum
+
+
+def _splat_box(x, y, values, box):
+    """The sums of :func:`splat` over the pixel centres of ``box`` (row0, row1, col0, col1), not
+    yet restricted to the hole: (acc (C, h, w), wsum (h, w)); ``values`` (C, N), channels first.
+
+    The sums run on the box padded by one pixel with one ``np.bincount`` per channel; points
+    whose four centres all lie outside the box are left out (they give the box nothing).
+    """
+    r0, r1, c0, c1 = box
+    h, w = r1 - r0, c1 - c0
+    W2 = w + 2
+    inside = _touches_box(x, y, box)
+    if not inside.all():
+        x, y, values = x[inside], y[inside], values[:, inside]
     x0, y0 = np.floor(x), np.floor(y)
+    xl, yl = x0.astype(np.int64) - (c0 - 1), y0.astype(np.int64) - (r0 - 1)  # padded-box coordinates
     fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
-    base = (y0.astype(np.int64) + 1) * W2 + x0.astype(np.int64) + 1
+    base = yl * W2 + xl
     k = np.concatenate([base, base + 1, base + W2, base + W2 + 1])
-    w = np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
+    wt = np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
 
     def grid(weights):
-        return np.bincount(k, weights, (H + 2) * W2).reshape(H + 2, W2)[1:-1, 1:-1] * hole
+        return np.bincount(k, weights, (h + 2) * W2).reshape(h + 2, W2)[1:-1, 1:-1]
 
-    wsum = grid(w)
-    w4 = w.reshape(4, -1)  # the four corners' weights of each point
-    acc = np.stack([grid((w4 * values[:, c]).reshape(-1)) for c in range(values.shape[1])], axis=-1)
-    return acc, wsum
+    w4 = wt.reshape(4, -1)  # the four corners' weights of each point
+    acc = np.empty((len(values), h, w))
+    for c, channel in enumerate(values):
+        acc[c] = grid((w4 * channel).reshape(-1))
+    return acc, grid(wt)
+
+
+def _touches_box(x, y, box) -> np.ndarray:
+    """Points some of whose four surrounding pixel centres lie in ``box`` (row0, row1, col0, col1)."""
+    r0, r1, c0, c1 = box
+    return (x >= c0 - 1) & (x < c1) & (y >= r0 - 1) & (y < r1)
 
 
 def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray,
@@ -164,8 +213,9 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
     checks.mask("hole", hole, rgb.shape[:2])
     checks.pose("T_w_cur", T_w_cur)
     H, W = hole.shape
+    box = _bbox(hole)
     pts = []
-    if hole.any():
+    if box is not None:
         T_cur_w = np.linalg.inv(T_w_cur)
         hole8 = hole.astype(np.uint8)
         near_hole = cv2.dilate(hole8, np.ones((3, 3), np.uint8)) > 0
@@ -175,27 +225,34 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
             use = _candidates(camera, kf, T, reach)
             if use is None:
                 continue
-            x, y, zc, u, v = _project(camera, kf, T, use)
+            x, y, zc, index = _project(camera, kf, T, use)
             xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
             land = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
             land[land] = near_hole[yi[land], xi[land]]
             k = np.flatnonzero(land)
-            vals = np.empty((k.size, 4), np.float32)  # r, g, b, depth in the current camera
-            vals[:, :3] = kf.rgb[v[k], u[k]]
-            vals[:, 3] = zc[k]
+            vals = np.empty((4, k.size), np.float32)  # r, g, b, depth in the current camera
+            vals[:3] = np.take(kf.rgb.reshape(-1, 3), index[k], axis=0).T
+            vals[3] = zc[k]
             pts.append((x[k], y[k], yi[k] * W + xi[k], vals))
+    out_rgb, out_depth = rgb.copy(), depth.copy()
+    wsum = np.zeros((H, W), np.float32)
+    filled = np.zeros((H, W), bool)
     if pts:
-        x, y, pix, vals = (np.concatenate(a) for a in zip(*pts))
+        x, y, pix = (np.concatenate(a) for a in list(zip(*pts))[:3])
+        vals = np.concatenate([p[3] for p in pts], axis=1)
         # visibility: at each landing pixel keep the nearest surface (within depth_tolerance)
         zmin = np.full(H * W, np.inf, np.float32)
-        np.minimum.at(zmin, pix, vals[:, 3])
-        near = vals[:, 3] <= zmin[pix] * (1.0 + depth_tolerance)
-        acc, wsum = splat(x[near], y[near], vals[near], hole)
-    else:
-        acc, wsum = np.zeros((H, W, 4)), np.zeros((H, W))
-    filled = hole & (wsum >= min_weight)
-    out_rgb, out_depth = rgb.copy(), depth.copy()
-    norm = acc[filled] / wsum[filled, None]
-    out_rgb[filled] = np.clip(np.rint(norm[:, :3]), 0, 255).astype(np.uint8)
-    out_depth[filled] = norm[:, 3].astype(depth.dtype)
-    return Restoration(out_rgb, out_depth, wsum.astype(np.float32), filled)
+        np.minimum.at(zmin, pix, vals[3])
+        near = (vals[3] <= zmin[pix] * (1.0 + depth_tolerance)) & _touches_box(x, y, box)
+        if not near.all():
+            x, y, vals = x[near], y[near], vals[:, near]
+        acc, ws = _splat_box(x, y, vals, box)
+        r0, r1, c0, c1 = box
+        crop = hole[r0:r1, c0:c1]
+        wsum[r0:r1, c0:c1] = ws * crop
+        ok = crop & (ws >= min_weight)
+        filled[r0:r1, c0:c1] = ok
+        norm = acc[:, ok] / ws[ok]
+        out_rgb[r0:r1, c0:c1][ok] = np.clip(np.rint(norm[:3].T), 0, 255).astype(np.uint8)
+        out_depth[r0:r1, c0:c1][ok] = norm[3].astype(depth.dtype)
+    return Restoration(out_rgb, out_depth, wsum, filled)
