@@ -5,7 +5,7 @@ import pytest
 from conftest import render_clean
 from dynslam_lite.depthcluster import (DepthClusterConfig, OutlierConfig, cluster_count, cluster_depth,
                                        estimate_pair, fill_edge_zeros, fill_holes, outliers, pre_remove, release)
-from dynslam_lite.depthcluster.clustering import layer_components
+from dynslam_lite.depthcluster.clustering import _kmeans_1d, layer_components
 from dynslam_lite.evaluation import MaskScores, evaluate
 from dynslam_lite.geometry import invert, se3_exp
 from dynslam_lite.io import open_sequence
@@ -35,6 +35,19 @@ def test_kmeans_separates_three_planes():
     assert np.allclose(c.centres, [1.0, 2.0, 3.5], atol=0.01)
     assert (c.labels == np.arange(3)[:, None]).all()
     assert np.allclose(c.clustered_depth()[1], c.centres[1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_kmeans_1d_is_scipys_kmeans2_bit_for_bit(seed):
+    from scipy.cluster.vq import kmeans2
+    rng = np.random.default_rng(seed)
+    # depth-like samples: a few surfaces with noise, sorted as cluster_depth gives them
+    x = np.sort(np.concatenate([rng.normal(m, 0.02 * m, 3000) for m in rng.uniform(0.8, 6.0, 5)]))
+    for n in (2, 5, 9):
+        init = np.unique(np.quantile(x, (np.arange(n) + 0.5) / n))
+        ref = kmeans2(x[:, None], init[:, None], iter=20, minit="matrix", missing="warn")[0][:, 0]
+        assert np.array_equal(_kmeans_1d(x, init, 20), ref)
+    assert _kmeans_1d(x, np.array([2.0, 1.0]), 20) is None  # not increasing: the caller uses scipy
 
 
 def test_fill_holes_by_reconstruction():

@@ -52,6 +52,7 @@ class OutlierConfig:
 def residuals(
     gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, depth_cur: np.ndarray,
     camera: PinholeCamera, T_cur_ref: np.ndarray, warp: tuple | None = None,
+    samples: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Photometric and depth residual images on the reference pixels (NaN where undefined).
 
@@ -60,6 +61,7 @@ def residuals(
     gray_ref, gray_cur : (H, W) float32 in [0, 1]
     depth_ref, depth_cur : (H, W) float32 metres
     warp : ``warp_coordinates(camera, depth_ref, T_cur_ref)`` when the caller has it
+    samples : ``current_samples(gray_cur, depth_cur)`` when the caller has it
     Returns
     -------
     r_I, r_D : (H, W) float32
@@ -68,7 +70,9 @@ def residuals(
     H, W = depth_ref.shape
     outside = ~((mu >= 0) & (mu <= W - 1) & (mv >= 0) & (mv <= H - 1))  # NaN (no depth) included
     # the warp is a whole-image map: one remap samples both channels (bilinear, as interpolate)
-    s = cv2.remap(np.dstack([gray_cur, depth_cur]).astype(np.float32), np.where(outside, np.float32(-1), mu),
+    if samples is None:
+        samples = current_samples(gray_cur, depth_cur)
+    s = cv2.remap(samples, np.where(outside, np.float32(-1), mu),
                   np.where(outside, np.float32(-1), mv), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     r_i = (s[..., 0] - gray_ref).astype(np.float32, copy=False)
     r_i[outside] = np.nan
@@ -76,6 +80,11 @@ def residuals(
     with np.errstate(invalid="ignore"):
         r_d = np.where((d > 0) & ~outside, d - z, np.nan).astype(np.float32)
     return r_i, r_d
+
+
+def current_samples(gray_cur: np.ndarray, depth_cur: np.ndarray) -> np.ndarray:
+    """(H, W, 2) float32: the current image and depth as the two channels :func:`residuals` samples."""
+    return cv2.merge([gray_cur.astype(np.float32, copy=False), depth_cur.astype(np.float32, copy=False)])
 
 
 def _threshold(r_i: np.ndarray, static: np.ndarray, cfg: OutlierConfig) -> float:

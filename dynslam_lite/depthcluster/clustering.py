@@ -62,8 +62,9 @@ def fill_holes(depth: np.ndarray) -> np.ndarray:
     # at a hole pixel: the lowest measured depth among its 4 neighbours (inf: none)
     around = cv2.erode(np.where(holes, np.float32(np.inf), img), _CROSS,
                        borderType=cv2.BORDER_CONSTANT, borderValue=float("inf"))
+    rim = holes & (around < np.inf)  # hole pixels next to a measured one (only they lower a level)
     level = np.full(n, np.inf, np.float32)
-    np.minimum.at(level, comp[holes], around[holes])
+    np.minimum.at(level, comp[rim], around[rim])
     level[np.concatenate([comp[0], comp[-1], comp[:, 0], comp[:, -1]])] = 0.0  # open to the border
     level[~np.isfinite(level)] = 0.0
     out = img.copy()
@@ -164,9 +165,37 @@ def cluster_depth(
     n = n_clusters or cluster_count(filled, max_clusters=max_clusters)
     sample = np.sort(z[:: max(1, z.size // max_samples)]).astype(float)
     init = np.unique(np.quantile(sample, (np.arange(n) + 0.5) / n))  # tied quantiles collapse
-    centres, _ = kmeans2(sample[:, None], init[:, None], iter=20, minit="matrix", missing="warn")
-    centres = np.unique(np.sort(centres[:, 0]))
+    centres = _kmeans_1d(sample, init, 20)
+    if centres is None:  # centres not strictly increasing: scipy's general k-means
+        centres = kmeans2(sample[:, None], init[:, None], iter=20, minit="matrix", missing="warn")[0][:, 0]
+    centres = np.unique(np.sort(centres))
     return DepthClusters(assign(filled, centres), centres, filled)
+
+
+def _kmeans_1d(x: np.ndarray, centres: np.ndarray, iters: int) -> np.ndarray | None:
+    """scipy's ``kmeans2(x[:, None], centres[:, None], iters, minit="matrix")`` for sorted 1-D
+    ``x``, bit for bit, without its (N, k) distance matrix: with increasing centres each cluster
+    is a run of the sorted samples, its ends found where the squared distances (vq's test, ties
+    to the lower centre) change order, and its mean summed in order as scipy does. None when the
+    centres stop increasing (the caller falls back to scipy)."""
+    c = np.array(centres, float)
+    n = len(x)
+    for _ in range(iters):
+        if np.any(np.diff(c) <= 0):
+            return None
+        ends = [0]
+        for c0, c1 in zip(c[:-1].tolist(), c[1:].tolist()):
+            j = int(np.searchsorted(x, 0.5 * (c0 + c1)))  # the split, then vq's exact test around it
+            while j > 0 and (float(x[j - 1]) - c1) ** 2 < (float(x[j - 1]) - c0) ** 2:
+                j -= 1
+            while j < n and not (float(x[j]) - c1) ** 2 < (float(x[j]) - c0) ** 2:
+                j += 1
+            ends.append(max(j, ends[-1]))
+        ends.append(n)
+        for i, (a, b) in enumerate(zip(ends[:-1], ends[1:])):
+            if b > a:  # an empty cluster keeps its centre
+                c[i] = np.cumsum(x[a:b])[-1] / (b - a)
+    return c
 
 
 def layer_components(clusters: DepthClusters, edge_tol_m: float = 0.05, edge_tol_rel: float = 0.03):
@@ -189,7 +218,7 @@ def layer_components(clusters: DepthClusters, edge_tol_m: float = 0.05, edge_tol
     for layer in range(clusters.n):
         m = ((clusters.labels == layer) & ~cut).astype(np.uint8)
         n_cc, cc = cv2.connectedComponents(m, connectivity=8)
-        comp[cc > 0] = cc[cc > 0] + offset
+        np.copyto(comp, cc + offset, where=cc > 0)
         offset += n_cc - 1
     return comp, np.bincount(comp.ravel(), minlength=offset + 1)
 

@@ -28,7 +28,7 @@ from ..geometry import PinholeCamera, rotation_angle_deg, warp_coordinates
 from ..odometry.dense import DenseConfig, align
 from ..tracking import Labels, Method, Tracked
 from ..imageops import disk
-from .background import OutlierConfig, outliers, release, residuals
+from .background import OutlierConfig, current_samples, outliers, release, residuals
 from .clustering import DepthClusters, cluster_depth, layer_components
 from .preremoval import PreRemoval, PreRemovalConfig, pre_remove
 
@@ -199,13 +199,14 @@ def estimate_pair(
                                  iterations=cfg.dense.iterations[-min(cfg.refine_levels, cfg.dense.levels):])
     comps = layer_components(clusters_ref) if cfg.outlier.grow else None
     last: tuple = (None,)  # (pose, r_I, r_D, warp) of the latest residual images
+    samples = current_samples(gray_cur, depth_cur)  # what the residuals sample, once per pair
     for k in range(cfg.update_iterations + 1):
         if k == cfg.update_iterations and not record:
             its.append(Iteration(T, removed, None, float("nan"), static_fraction(removed), True))
             break
         with stage(f"update_{k + 1}"):
             warp = warp_coordinates(camera, depth_ref, T)
-            r_i, r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp)
+            r_i, r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp, samples)
             last = (T, r_i, r_d, warp)
             out, tau = outliers(r_i, r_d, depth_ref, valid & ~removed, cfg.outlier, comps)
         its.append(Iteration(T, removed, r_i if record else None, tau, static_fraction(removed), True))
@@ -238,7 +239,7 @@ def estimate_pair(
         with stage("release"):
             if last[0] is not T:  # the pose moved since the last residuals
                 warp = warp_coordinates(camera, depth_ref, T)
-                last = (T, *residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp), warp)
+                last = (T, *residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp, samples), warp)
             moving = release(removed, last[1], last[2], depth_ref, cfg.outlier,
                              comps if comps is not None else layer_components(clusters_ref))
     return PairResult(T, True, "", clusters_ref, pre, its, moving, removed, last[3] if last[0] is T else None)

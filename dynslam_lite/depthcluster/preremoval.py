@@ -166,8 +166,8 @@ def _remove_regions(labels, block, dynamic, moving, cfg: PreRemovalConfig) -> np
     near_dyn = cv2.dilate(dynamic.reshape(cfg.rows, cfg.cols).astype(np.uint8), np.ones((3, 3), np.uint8))
     near_dyn_px = near_dyn.reshape(-1).astype(bool)[block]
     for layer in np.unique(moving[dynamic]):
-        n_cc, cc, stats, _ = cv2.connectedComponentsWithStats((labels == layer).astype(np.uint8), connectivity=8)
-        area = stats[:, cv2.CC_STAT_AREA]
+        n_cc, cc = cv2.connectedComponents((labels == layer).astype(np.uint8), connectivity=8)
+        area = np.bincount(cc.ravel(), minlength=n_cc)
         blocks = np.flatnonzero(dynamic & (moving == layer))
         # per dynamic block, the largest component of this layer inside it
         in_blocks = np.zeros(dynamic.size, bool)
