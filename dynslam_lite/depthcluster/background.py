@@ -45,7 +45,7 @@ class OutlierConfig:
     grow_min_overlap: float = 0.2
     grow_max_area_fraction: float = 0.15
     mad_stride: int = 4
-    release_open_px: int = 4
+    release_open_px: int = 0
     release_min_outliers: float = 0.1
 
 
@@ -145,8 +145,11 @@ def release(removed: np.ndarray, r_i: np.ndarray, r_d: np.ndarray, depth_ref: np
     least ``release_min_outliers`` of the pixels are photometric outliers is a moving object and
     kept whole, so the inner pixels of a person that a frame pair cannot tell from static stay
     removed, and so do the depth steps between regions (an object's outline); a removed pixel
-    without measured depth (no residual) follows its region. An opening by a disk of
-    ``release_open_px`` keeps specks removed.
+    without measured depth (no residual) follows its region. ``release_open_px`` > 0 opens the
+    released pixels by a disk of that radius, so that only released areas wider than it go back;
+    off by default: with 4 px it kept thin static structures and speckled background removed and
+    cost IoU on each synthetic walking scene (``paper_a_masks``, walking_rpy: IoU 0.415 with it,
+    0.463 without; precision 0.49 -> 0.62, recall 0.73 -> 0.65).
 
     Returns
     -------
@@ -167,5 +170,6 @@ def release(removed: np.ndarray, r_i: np.ndarray, r_d: np.ndarray, depth_ref: np
             # no measured depth, no residual: such a pixel follows its (hole-filled) region
             inlier |= removed & (depth_ref <= 0)
             inlier &= ~moving[comp]
-    inlier = cv2.morphologyEx(inlier.astype(np.uint8), cv2.MORPH_OPEN, disk(cfg.release_open_px)) > 0
+    if cfg.release_open_px:
+        inlier = cv2.morphologyEx(inlier.astype(np.uint8), cv2.MORPH_OPEN, disk(cfg.release_open_px)) > 0
     return removed & ~inlier
