@@ -69,22 +69,23 @@ def residuals(
     mu, mv, z = warp if warp is not None else warp_coordinates(camera, depth_ref, T_cur_ref)
     H, W = depth_ref.shape
     outside = ~((mu >= 0) & (mu <= W - 1) & (mv >= 0) & (mv <= H - 1))  # NaN (no depth) included
-    # the warp is a whole-image map: one remap samples both channels (bilinear, as interpolate)
+    # the warp is a whole-image map: remap samples image and depth (bilinear, as interpolate;
+    # one channel each: a 2-channel remap rounds the position to 1/32 pixel)
     if samples is None:
         samples = current_samples(gray_cur, depth_cur)
-    s = cv2.remap(samples, np.where(outside, np.float32(-1), mu),
-                  np.where(outside, np.float32(-1), mv), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    r_i = (s[..., 0] - gray_ref).astype(np.float32, copy=False)
-    r_i[outside] = np.nan
-    d = s[..., 1]
-    with np.errstate(invalid="ignore"):
-        r_d = np.where((d > 0) & ~outside, d - z, np.nan).astype(np.float32)
-    return r_i, r_d
+    mu, mv = np.where(outside, np.float32(-1), mu), np.where(outside, np.float32(-1), mv)
+    i, d = (cv2.remap(c, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) for c in samples)
+    i -= gray_ref  # in place: r_I
+    i[outside] = np.nan
+    no_depth = outside | (d <= 0)
+    d -= z  # r_D
+    d[no_depth] = np.nan
+    return i, d
 
 
-def current_samples(gray_cur: np.ndarray, depth_cur: np.ndarray) -> np.ndarray:
-    """(H, W, 2) float32: the current image and depth as the two channels :func:`residuals` samples."""
-    return cv2.merge([gray_cur.astype(np.float32, copy=False), depth_cur.astype(np.float32, copy=False)])
+def current_samples(gray_cur: np.ndarray, depth_cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The current image and depth as the float32 images :func:`residuals` samples."""
+    return gray_cur.astype(np.float32, copy=False), depth_cur.astype(np.float32, copy=False)
 
 
 def _threshold(r_i: np.ndarray, static: np.ndarray, cfg: OutlierConfig) -> float:

@@ -140,7 +140,7 @@ def estimate_pair(
     gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, depth_cur: np.ndarray,
     camera: PinholeCamera, T_init: np.ndarray | None = None, config: DepthClusterConfig | None = None,
     clusters_ref: DepthClusters | None = None, filled_cur: np.ndarray | None = None,
-    prior: np.ndarray | None = None, record: bool = False, timer=None,
+    prior: np.ndarray | None = None, record: bool = False, timer=None, shared: dict | None = None,
 ) -> PairResult:
     """Run the four steps of paper A on frames A (reference) and B (current).
 
@@ -156,6 +156,8 @@ def estimate_pair(
         persist: the updates re-derive the moving pixels from the residuals
     record : keep the residual image of every iteration (notebooks)
     timer : optional :class:`dynslam_lite.pipeline.StageTimer`
+    shared : the alignments' dict of this pair (:func:`dynslam_lite.odometry.dense.align`), when
+        the caller wants its pyramids or brings the reference frame's
     """
     image01("gray_ref", gray_ref)
     image01("gray_cur", gray_cur, gray_ref.shape)
@@ -187,7 +189,7 @@ def estimate_pair(
         removed = base.copy()  # prior and pre-removal took nearly everything: do not trust them
     if static_fraction(removed) < cfg.min_static_fraction:
         removed[:] = False
-    shared: dict = {}  # pyramids of the pair, built by the first alignment
+    shared = {} if shared is None else shared  # pyramids of the pair, built by the first alignment
     with stage("align_0"):
         r = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_init, ~removed, cfg.dense, shared)
     its: list[Iteration] = []
@@ -264,7 +266,7 @@ def propagate_mask(moving: np.ndarray, depth_ref: np.ndarray, camera: PinholeCam
     u, v = np.rint(mu[ok]).astype(int), np.rint(mv[ok]).astype(int)
     inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
     out = np.zeros((H, W), np.uint8)
-    out[v[inside], u[inside]] = 1
+    out.reshape(-1)[v[inside] * W + u[inside]] = 1
     k = disk(close_px)
     return cv2.dilate(cv2.morphologyEx(out, cv2.MORPH_CLOSE, k), k).astype(bool)
 
@@ -285,6 +287,7 @@ class DepthClusterMethod(Method):
         self.camera, self.config = camera, config
         self._cache: tuple[float, DepthClusters] | None = None
         self._prior: tuple[float, np.ndarray] | None = None
+        self._pyramids: tuple[float, tuple] | None = None  # the last current frame's, for the next pair
         self.iterations_used: list[int] = []
         self.area = np.zeros(3)  # sums over pairs of the removed fraction: pre-removal, final, pose
 
@@ -302,9 +305,14 @@ class DepthClusterMethod(Method):
         prior = None
         if self._prior is not None and self._prior[0] == ref.timestamp:
             prior = self._prior[1]
+        shared = {}
+        if self._pyramids is not None and self._pyramids[0] == ref.timestamp:
+            shared["ref_pyramids"] = self._pyramids[1]
         res = estimate_pair(ref.gray.astype(np.float32) / 255.0, ref.depth,
                             cur.gray.astype(np.float32) / 255.0, cur.depth, self.camera, T_init,
-                            self.config, c_ref, c_cur.filled, prior, timer=timer)
+                            self.config, c_ref, c_cur.filled, prior, timer=timer, shared=shared)
+        if "pyramids" in shared:
+            self._pyramids = (cur.timestamp, shared["pyramids"][2:])
         if self.config.propagate and res.ok:
             with timer.stage("propagate"):
                 self._prior = (cur.timestamp, propagate_mask(res.excluded, ref.depth, self.camera,

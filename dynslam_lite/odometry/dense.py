@@ -37,7 +37,8 @@ class DenseConfig:
     finest_level : last level optimised (0 = full resolution; 1 = half resolution, default:
         about 3x faster, and on fr2/desk_50 and synthetic static_xyz within 1 mm of ATE of
         full resolution)
-    iterations : maximum Gauss-Newton iterations per level, coarsest level first
+    iterations : maximum Gauss-Newton iterations per level, level 0 (finest) first; levels past
+        the tuple take its last entry
     lambda_depth : lambda_I of eq. 5, weight of the depth residual (metres) against the
         photometric one (intensity in [0, 1]): 1 intensity unit ~ 1 m. Both residuals have a
         comparable noise floor on Kinect data (about 0.01 in intensity, 0.01 m at 2 m), hence 1.
@@ -102,10 +103,23 @@ def _geometric_jacobian(g_u, g_v, P, cam: PinholeCamera) -> np.ndarray:
     """
     X, Y, Z = P
     iz = 1.0 / Z
-    a = g_u * cam.fx * iz
-    b = g_v * cam.fy * iz
-    c = -(a * X + b * Y) * iz
-    return np.stack([a, b, c, Y * c - Z * b, Z * a - X * c, X * b - Y * a]).astype(np.float32, copy=False)
+    J = np.empty((6, Z.size), np.result_type(g_u, iz))  # rows written in place, no stacking copy
+    a, b, c = J[0], J[1], J[2]
+    np.multiply(g_u, cam.fx, out=a)
+    a *= iz
+    np.multiply(g_v, cam.fy, out=b)
+    b *= iz
+    np.multiply(a, X, out=c)
+    c += b * Y
+    np.negative(c, out=c)
+    c *= iz
+    np.multiply(Y, c, out=J[3])
+    J[3] -= Z * b
+    np.multiply(Z, a, out=J[4])
+    J[4] -= X * c
+    np.multiply(X, b, out=J[5])
+    J[5] -= Y * a
+    return J.astype(np.float32, copy=False)
 
 
 class _Level:
@@ -127,8 +141,10 @@ class _Level:
         step = np.maximum(np.abs(self.du), np.abs(self.dv))
         smooth = (step < 0.02 * depth + 0.005).astype(np.float32)
         cross = cv2.erode(cross * smooth, np.ones((3, 3), np.uint8))
-        # one stacked image: a single remap samples everything
-        self.stack = np.dstack([gray, self.gu, self.gv, depth, self.du, self.dv, cross])
+        # two 4-channel images (the last channel unused): remap samples 4 channels at once and at
+        # the exact position (see geometry.interpolate)
+        self.stack = (cv2.merge([gray, self.gu, self.gv, depth]),
+                      cv2.merge([self.du, self.dv, cross, np.zeros_like(cross)]))
 
 
 def align(
@@ -152,7 +168,9 @@ def align(
     mask_ref : (H, W) bool, reference pixels allowed in the sums (static background); all if None
     shared : a dict kept by the caller between alignments of the same frame pair (paper A aligns
         each pair several times, with different masks): the pyramids and the current frame's
-        gradients are built once, by the first call
+        gradients are built once, by the first call. A caller that tracks frame by frame may put
+        the reference frame's ``(image, depth)`` pyramids in it as ``"ref_pyramids"`` (the
+        previous pair's current frame, ``shared["pyramids"][2:]``)
     Returns
     -------
     DenseResult
@@ -169,16 +187,18 @@ def align(
     T = np.eye(4) if T_init is None else np.asarray(T_init, float).copy()
     shared = {} if shared is None else shared
     if shared.get("levels", 0) < cfg.levels:
+        ref = shared.get("ref_pyramids")
+        if ref is None or len(ref[0]) < cfg.levels:
+            ref = image_pyramid(gray_ref.astype(np.float32), cfg.levels), depth_pyramid(depth_ref, cfg.levels)
         shared.update(levels=cfg.levels, pyramids=(
-            image_pyramid(gray_ref.astype(np.float32), cfg.levels), depth_pyramid(depth_ref, cfg.levels),
-            image_pyramid(gray_cur.astype(np.float32), cfg.levels), depth_pyramid(depth_cur, cfg.levels)))
+            *ref, image_pyramid(gray_cur.astype(np.float32), cfg.levels), depth_pyramid(depth_cur, cfg.levels)))
     gref, dref, gcur, dcur = shared["pyramids"]  # coarser levels unused when this call has fewer
     mref = None
     if mask_ref is not None:
         mref = image_pyramid(mask_ref.astype(np.float32), cfg.levels)
     history: list[list[float]] = []
     valid_pixels = 0
-    ones = np.ones(7, np.float32)
+    ones = np.ones(4, np.float32)
     iters = list(cfg.iterations) + [cfg.iterations[-1]] * max(0, cfg.levels - len(cfg.iterations))
     for level in range(cfg.levels - 1, cfg.finest_level - 1, -1):
         cam = camera.scaled(level)
@@ -212,15 +232,16 @@ def align(
             if idx.size < min_valid:
                 return DenseResult(T_prev, False, f"only {idx.size} pixels overlap at level {level}",
                                    idx.size, history + [costs])
-            s = interpolate(cur.stack, pu[idx], pv[idx])
-            finite = np.isfinite(s @ ones)  # a non-finite channel makes the row sum non-finite
+            s, sd = interpolate(cur.stack, pu[idx], pv[idx])  # (I, I_u, I_v, D), (D_u, D_v, smooth, 0)
+            finite = np.isfinite(s @ ones) & np.isfinite(sd @ ones)  # a non-finite channel makes the sum non-finite
             if not finite.all():
-                idx, s = idx[finite], s[finite]
+                idx, s, sd = idx[finite], s[finite], sd[finite]
             r_I = s[:, 0] - I_ref[idx]
             w_I = _huber_weights(r_I, cfg.huber_intensity)
-            dok = (s[:, 6] > 0.999) & (s[:, 3] > 0)
-            Z = P[2, idx]
-            r_D = (s[dok, 3] - Z[dok]).astype(np.float32)
+            di = np.flatnonzero((sd[:, 2] > 0.999) & (s[:, 3] > 0))  # the samples with a depth residual
+            Pi = np.take(P, idx, axis=1)
+            sd, P_d = np.take(sd, di, axis=0), np.take(Pi, di, axis=1)
+            r_D = s[di, 3] - P_d[2]
             w_D = _huber_weights(r_D, cfg.huber_depth_m) * np.float32(cfg.lambda_depth)
             cost = float(np.sum(w_I * r_I**2) + np.sum(w_D * r_D**2)) / idx.size
             if not np.isfinite(cost):
@@ -232,13 +253,11 @@ def align(
             prev_cost = cost
             valid_pixels = idx.size
             # Jacobians only for an accepted pose (a rejected step ends the level)
-            Pi = np.take(P, idx, axis=1)
             J_I = _geometric_jacobian(s[:, 1], s[:, 2], Pi, cam)
-            Pd = Pi[:, dok]
-            J_D = _geometric_jacobian(s[dok, 4], s[dok, 5], Pd, cam)
+            J_D = _geometric_jacobian(sd[:, 0], sd[:, 1], P_d, cam)
             J_D[2] -= 1.0  # minus d(Z')/d(delta): translation (0, 0, 1), rotation (Y, -X, 0)
-            J_D[3] -= Pd[1]
-            J_D[4] += Pd[0]
+            J_D[3] -= P_d[1]
+            J_D[4] += P_d[0]
             JwI = J_I * w_I
             JwD = J_D * w_D
             H = JwI @ J_I.T + JwD @ J_D.T
