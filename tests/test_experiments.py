@@ -37,7 +37,8 @@ def test_runs_per_sequence_follow_the_run_sets():
     xyz = E.runs_for("synthetic", "walking_xyz")
     assert len(xyz) == 19 and xyz[-1] is E.BG_ADJACENT and E.BGRESTORE in xyz
     carry = E.runs_for("synthetic", "walking_carry")
-    assert carry == list(E.OBJECT_ROWS) and E.DEPTHCLUSTER not in carry
+    assert carry == [E.STATIC_DENSE, E.OPENCV_ODOMETRY, E.DEPTHCLUSTER, *E.OBJECT_ROWS]
+    assert E.DC_PAPER not in carry and E.DC_PAPER in E.runs_for("synthetic", "crowd")
     real = E.runs_for("real")
     assert E.WEIGHTEDSTATIC.mask_source("real") == "person" and E.WEIGHTEDSTATIC.mask_source("synthetic") == "oracle"
     assert E.BG_NO_RESTORE not in real and E.OPENCV_FAST in real and E.STATIC_ORB_PERSON in real
