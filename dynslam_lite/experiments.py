@@ -106,10 +106,26 @@ STATIC_ORB_CONSISTENT = Run("static-orb[oracle,consistent]", "static-orb", "orac
                             "masks only, pose on the PnP-RANSAC-consistent matches (ours)")
 WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("frontend.consistent_pose", False),),
                      "masks + geometric test + weights, first pose by ORB-SLAM2's optimisation")
-BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", "oracle", (("frontend.consistent_pose", True),),
+BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", SEMANTIC, (("frontend.consistent_pose", True),),
                     "paper C with the pose on the PnP-RANSAC-consistent matches (ours)")
 BG_ALL = _run("bgrestore[oracle:all]", "bgrestore", "oracle:all",
               "every object instance voted on (paper C's Mask R-CNN classes), not people only")
+STATIC_ORB_MOVING = _run("static-orb[oracle:moving]", "static-orb", "oracle:moving",
+                         "masks of every moving object from the ground truth: the bound of any moving-object handling")
+
+# real data: the same runs with the keypoint budget 1 % lower and higher, which says how far a
+# real clip's single ATE moves when nothing that should matter changes
+_BUDGETS = (990, 1010)
+_KP = "frontend.orb.n_features"
+SENSITIVITY_OF = {  # base run -> its runs with the budgets of _BUDGETS, in that order
+    WEIGHTEDSTATIC: (
+        Run("weightedstatic[orb.n_features=990]", "weightedstatic", SEMANTIC, ((_KP, 990),), "990 ORB keypoints"),
+        Run("weightedstatic[orb.n_features=1010]", "weightedstatic", SEMANTIC, ((_KP, 1010),), "1010 ORB keypoints")),
+    BGRESTORE: (
+        Run("bgrestore[orb.n_features=990]", "bgrestore", SEMANTIC, ((_KP, 990),), "990 ORB keypoints"),
+        Run("bgrestore[orb.n_features=1010]", "bgrestore", SEMANTIC, ((_KP, 1010),), "1010 ORB keypoints")),
+}
+SENSITIVITY = tuple(r for runs in SENSITIVITY_OF.values() for r in runs)
 
 
 @dataclass(frozen=True)
@@ -128,9 +144,10 @@ class RunSet:
         return not self.real and (self.scenes is None or scene in self.scenes)
 
 
-# our object scenes: masks alone, with the consistent pose, paper B, paper C (person-only and all-class masks)
+# our object scenes: masks alone, with the consistent pose, paper B, paper C (person-only and all-class
+# masks), and the truth's moving-object masks as the bound
 OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FIRST, WEIGHTEDSTATIC, BGRESTORE,
-               BG_CONSISTENT, BG_ALL)
+               BG_CONSISTENT, BG_ALL, STATIC_ORB_MOVING)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
     RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),
@@ -149,8 +166,9 @@ RUN_SETS = (
     RunSet("object scenes", OBJECT_ROWS, scenes=OBJECT_SCENES),
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
-                         STATIC_ORB_PERSON, WS_NONE, BG_NONE), real=True),
+                         STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT), real=True),
     RunSet("paper A ablation on real data", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT), real=True),
+    RunSet("sensitivity on real data", SENSITIVITY, real=True),
 )
 
 # rows of paper A's ablation table, in order (the default last: every addition on)

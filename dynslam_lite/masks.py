@@ -9,7 +9,9 @@ a source is chosen by a spec string (``--masks`` on the command line, ``masks`` 
   components); ``oracle:degraded`` imitates a real network: dilated or eroded outlines, dropped
   frames, false blobs (deterministic per seed and frame); ``oracle:all`` — every object instance
   of the synthetic ground truth, people, carried and pushed objects and furniture alike (what an
-  instance segmenter such as paper C's Mask R-CNN gives);
+  instance segmenter such as paper C's Mask R-CNN gives); ``oracle:moving`` — the ground truth
+  of every object that moves in the frame, whatever its class (no method can know this: the run
+  with it bounds what any handling of moving objects can reach on a scene);
 * ``files:DIR`` — PNG masks computed elsewhere (e.g. YOLOv5-seg or Mask R-CNN run on your
   machine), one per colour frame, named by its timestamp as in TUM's ``rgb/`` folder
   (``1311868164.363181.png``; the nearest within 0.02 s is used). 8- or 16-bit, 0 = background,
@@ -106,6 +108,23 @@ class AllObjectMasks:
         return [frame.instances == k for k, n in zip(ids, counts) if k and n >= self.min_area]
 
 
+class MovingMasks:
+    """The ground-truth masks of the objects moving in each frame (``oracle:moving``), one
+    instance per object where the sequence has instances, else connected components."""
+
+    name = "oracle:moving"
+
+    def __call__(self, frame: Frame) -> list[np.ndarray]:
+        if frame.mask is None:
+            raise SequenceError("masks 'oracle:moving' need ground-truth masks (masks/ of a synthetic "
+                                f"sequence); frame {frame.index} has none")
+        if frame.instances is None:
+            return split_instances(frame.mask)
+        ids = np.unique(frame.instances[frame.mask])
+        rest = frame.mask & (frame.instances == 0)  # moving pixels of no instance, if any
+        return [(frame.instances == k) & frame.mask for k in ids if k] + (split_instances(rest) if rest.any() else [])
+
+
 class FileMasks:
     """Instance masks from PNG files named by timestamp (see the module docstring)."""
 
@@ -148,7 +167,7 @@ class FileMasks:
         return [img == i for i in ids]
 
 
-SOURCES = "none, oracle, oracle:degraded, oracle:all, files:DIR, person, person:landscape or onnx:PATH"
+SOURCES = "none, oracle, oracle:degraded, oracle:all, oracle:moving, files:DIR, person, person:landscape or onnx:PATH"
 
 
 def make_mask_source(spec: str):
@@ -160,6 +179,8 @@ def make_mask_source(spec: str):
         return OracleMasks(Degradation() if arg else None)
     if kind == "oracle" and arg == "all":
         return AllObjectMasks()
+    if kind == "oracle" and arg == "moving":
+        return MovingMasks()
     if kind == "files" and arg:
         return FileMasks(arg)
     if kind == "person" and arg in ("", "square", "landscape"):

@@ -194,3 +194,18 @@ def test_paper_a_ablation_has_the_paper_alone_each_addition_and_the_default_per_
     header, rows, _ = tables.paper_a_ablation(recs)
     assert [(r[0], r[2]) for r in rows] == [(s, run.label) for s in (xyz, real) for run in E.PAPER_A_ABLATION]
     assert rows[0][3] == 0.01 and rows[4][3] == 0.05 and rows[0][10:13] == [0.75, 0.75, 0.6]
+
+
+def test_real_sensitivity_rows_hold_the_default_and_both_budgets_of_each_real_clip():
+    from dynslam_lite import tables
+
+    assert all(r in E.runs_for("real") for r in E.SENSITIVITY)
+    assert not any(r in E.runs_for("synthetic", "walking_xyz") for r in E.SENSITIVITY)
+    bonn = "real/rgbd_bonn_crowd_dev"
+    recs = [_record(bonn, E.WEIGHTEDSTATIC, 0.02), *(_record(bonn, r, a) for r, a in
+                                                    zip(E.SENSITIVITY_OF[E.WEIGHTEDSTATIC], (0.01, 0.03)))]
+    recs.append(_record(bonn, E.BGRESTORE, 0.02))  # a base without its variants gives no row
+    recs.append(_record("synthetic/walking_xyz", E.WEIGHTEDSTATIC, 0.5))
+    header, rows, _ = tables.real_sensitivity(recs)
+    assert len(rows) == 1 and rows[0][:5] == [bonn, E.WEIGHTEDSTATIC.label, 0.02, 0.01, 0.03]
+    assert abs(rows[0][5] - 0.02) < 1e-12 and rows[0][6] == "3.00"

@@ -133,3 +133,17 @@ def test_crowd_fills_over_half_the_image_and_oracle_masks_are_people_only(tmp_pa
     every = make_mask_source("oracle:all")(f)
     classes_seen = {f.classes[int(f.instances[m][0])] for m in every}
     assert {"person", "board", "table"} <= classes_seen
+
+
+def test_oracle_moving_masks_are_the_moving_objects_one_per_instance(tmp_path):
+    """``oracle:moving``: every object moving in the frame (the carried board and box, the
+    walking people), each its own instance, and nothing that stands still."""
+    from dynslam_lite.masks import make_mask_source
+
+    f = open_sequence(generate(tmp_path / "carry", "walking_carry", 3, 0).path)[2]
+    moving = make_mask_source("oracle:moving")(f)
+    union = np.logical_or.reduce(moving)
+    assert (union == f.mask).all()
+    ids = [set(np.unique(f.instances[m])) for m in moving]
+    assert all(len(s) == 1 for s in ids) and len(moving) == len(np.unique(f.instances[f.mask]))
+    assert {f.classes[s.pop()] for s in ids} >= {"person", "board"}

@@ -40,6 +40,18 @@ the reference is of the same size as the board's motion between keyframes, it ra
 false alarms as it finds, and ATE got worse (0.013 -> 0.019 m on walking_carry, 0.021 -> 0.023 m
 on the Bonn dev clip), so it stays off.
 
+Why the test finds few of the carried board's matches (measured on walking_carry, oracle masks,
+150 frames): the board's keypoints become map points at a keyframe and are matched in the next
+one or two frames, so their only reference is a keyframe 1-2 frames back. Against it, with the
+ground-truth relative pose, they sit 4.6 px (median, octave-scaled) from where a static point
+would reappear, static matches 0.5 px; with the pose the method estimates, 0.7 px. Where the
+static matches are far (the room behind, 3-4 m) they fix the pose only up to the
+translation/rotation ambiguity of a small baseline, and the near board (1.5-2 m) pins that
+direction: the estimated pose absorbs the board's motion between the two frames, and no test
+against it (eq. 4 or the along-line variant) can see it. Thresholds on the reprojection error
+against the references give recall 0.72 at precision 0.56 with the true poses, 0.14 at 0.20 with
+the estimated ones.
+
 References: paper B (weightedstatic), sec. 3.2, eq. 4; paper C eq. 3 for the plain epipolar
 distance.
 """
