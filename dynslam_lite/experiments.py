@@ -104,6 +104,8 @@ BG_NONE = _run("bgrestore[none]", "bgrestore", "none", "no masks (removes nothin
 # the object scenes (carried, pushed, still and crowding objects): what each step adds over masks
 STATIC_ORB_CONSISTENT = Run("static-orb[oracle,consistent]", "static-orb", "oracle", (("consistent_pose", True),),
                             "masks only, pose on the PnP-RANSAC-consistent matches (ours)")
+WS_EQ4 = Run("weightedstatic[eq4-only]", "weightedstatic", SEMANTIC, (("geometric.free_space", False),),
+             "masks + geometric test + weights, eq. 4 only: no free-space test against references without the point")
 WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("frontend.consistent_pose", False),),
                      "masks + geometric test + weights, first pose by ORB-SLAM2's optimisation")
 BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", SEMANTIC, (("frontend.consistent_pose", True),),
@@ -146,7 +148,7 @@ class RunSet:
 
 # our object scenes: masks alone, with the consistent pose, paper B, paper C (person-only and all-class
 # masks), and the truth's moving-object masks as the bound
-OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FIRST, WEIGHTEDSTATIC, BGRESTORE,
+OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FIRST, WS_EQ4, WEIGHTEDSTATIC, BGRESTORE,
                BG_CONSISTENT, BG_ALL, STATIC_ORB_MOVING)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
@@ -166,7 +168,7 @@ RUN_SETS = (
     RunSet("object scenes", OBJECT_ROWS, scenes=OBJECT_SCENES),
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
-                         STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT), real=True),
+                         STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT, WS_EQ4), real=True),
     RunSet("paper A ablation on real data", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT), real=True),
     RunSet("sensitivity on real data", SENSITIVITY, real=True),
 )

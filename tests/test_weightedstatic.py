@@ -126,3 +126,30 @@ def test_weightedstatic_reports_dynamic_point_scores(walking):
     r = walking["deg"][1]
     g = r.scores["points/geometric"]
     assert r.scored_points > 1000 and 0.0 <= g.precision <= 1.0 and g.tp + g.fn > 0
+
+
+def test_free_space_test_flags_a_point_the_reference_saw_through_and_nothing_else():
+    """A reference camera 20 cm to the left looks at a wall 3 m away. Now a board point is 2 m in
+    front of that camera, where the reference saw the wall: free space violated, score
+    (3 - z_r) / z_r. A wall point, a wall point on the edge of a hole in the reference's depth,
+    and a point the reference saw hidden behind something nearer score 0 (or no verdict)."""
+    from dynslam_lite.weightedstatic.geometric import free_space_test, nearest_depth
+
+    T_cur_ref = se3_exp([0.2, 0.0, 0.0, 0.0, 0.0, 0.0])
+    T_ref_cur = invert(T_cur_ref)
+    depth_ref = np.full((480, 640), 3.0, np.float32)
+    depth_ref[200:260, 100:140] = 0.0  # no depth there (an edge, a glossy patch)
+    depth_ref[300:340, 400:440] = 1.0  # something near the reference camera
+    X_ref = np.array([[0.0, 0.0, 2.0], [0.5, 0.2, 3.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    X_ref[2] = np.array([(139.0 + 1 - 319.5) * 3.0 / 525.0, (230 - 239.5) * 3.0 / 525.0, 3.0])  # beside the hole
+    X_ref[3] = np.array([(420 - 319.5) * 2.5 / 525.0, (320 - 239.5) * 2.5 / 525.0, 2.5])  # behind the near thing
+    X_cur = X_ref @ T_cur_ref[:3, :3].T + T_cur_ref[:3, 3]
+    score = free_space_test(CAM, T_ref_cur, _pix(X_cur), X_cur[:, 2], nearest_depth(depth_ref, 5))
+    assert score[0] == pytest.approx((3.0 - 2.0) / 2.0, rel=1e-5)
+    assert score[1] == pytest.approx(0.0, abs=1e-5) and score[2] == pytest.approx(0.0, abs=1e-5)
+    assert score[3] == 0.0
+    assert (score[:1] >= GeometricConfig().sigma2).all() and (score[1:] < GeometricConfig().sigma2).all()
+    # no depth at the keypoint, or no depth anywhere in the window: no verdict
+    hole = np.array([[120.0, 230.0]])
+    none = free_space_test(CAM, np.eye(4), np.vstack([hole, hole]), np.array([0.0, 3.0]), nearest_depth(depth_ref, 5))
+    assert np.isnan(none).all()
