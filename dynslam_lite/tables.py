@@ -528,11 +528,12 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
                              pr(r, "points/geometric"), pr(r, "pixels/removed")])
     notes = ("ATE RMSE (m) after SE(3) alignment, on this project's object scenes: walking_carry "
              "(a board and a box carried across the view: moving, not people), walking_push (a "
-             "chair pushed 1.6 m while the camera moves; a person standing still for 2 s), crowd "
+             "large printed box pushed 1.6 m about 2 m ahead of the moving camera; a person "
+             "standing still for 2 s), crowd "
              "(three people, one passing close to the camera; people cover up to half the "
              "image). 'oracle' masks are the person class only (what a person detector gives); "
              "'oracle:all' every object instance with its class (paper C's Mask R-CNN). Truth for "
-             "P / R: the ground-truth mask of every moving object (people, board, box, chair). "
+             "P / R: the ground-truth mask of every moving object (people, board, boxes). "
              "'dynamic points': matched keypoints outside the masks judged dynamic by the "
              "geometric test (weightedstatic); 'removed pixels': the dilated instances bgrestore "
              "removed. 'consistent' = the pose optimised on the matches PnP-RANSAC finds "
@@ -544,9 +545,8 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
              "and restoration add. "
              f"{E.STATIC_ORB_MOVING.label} masks every moving object with the ground truth (no "
              "method knows it): what removing the moving objects perfectly gives, the bound of "
-             "every row above. Where it is no better than masks only (walking_push: the pushed "
-             "chair holds under 1 % of the matches and does not pull the pose), no handling of "
-             "moving objects has anything to gain there. A step that does not help "
+             "every row above. Where it is no better than masks only, no handling of moving objects "
+             "has anything to gain on that scene. A step that does not help "
              "on a scene shows as no gain; notebook 20 has the geometric test with the true poses "
              "and our along-line variant on walking_carry.")
     return header, rows, notes

@@ -57,3 +57,15 @@ def scene(synth_cache):
         return ensure_scene(synth_cache, name, frames, seed=0, background=background)
 
     return make
+
+
+@pytest.fixture(scope="session")
+def tiny_tables(tmp_path_factory):
+    """{file name: bytes} of the tables of a fresh tiny batch (own run cache, no notebooks): what
+    any other tiny batch must write, byte for byte, apart from its wall-clock tables."""
+    from dynslam_lite.cli import main
+
+    root = tmp_path_factory.mktemp("tiny")
+    assert main(["reproduce", "--profile", "tiny", "--jobs", "2", "--no-notebooks",
+                 "--cache", str(root / "cache"), "--reports", str(root / "reports")]) == 0
+    return {p.name: p.read_bytes() for p in (root / "reports" / "tables").iterdir()}

@@ -163,6 +163,6 @@ def test_first_keyframe_keeps_far_points_and_later_ones_top_up_to_100():
     assert len(tr.map) > 500
     kf = tr.keyframes[0]
     n0 = len(tr.map)
-    tr._add_keyframe(1, np.eye(4), kf.feats, np.zeros(0, int), np.zeros(0, int), np.ones(0),
+    tr._add_keyframe(Frame(1, 0.033, rgb, far), np.eye(4), kf.feats, np.zeros(0, int), np.zeros(0, int), np.ones(0),
                      np.zeros(len(kf.feats), bool))
     assert len(tr.map) - n0 == tr.config.min_new_points

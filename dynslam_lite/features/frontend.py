@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 
 from ..geometry import PinholeCamera, backproject, invert, normalize_pose, project, transform_points
+from ..io import Frame
 from .matching import match_descriptors, search_by_projection
 from .optimize import Observations, PoseResult, local_bundle_adjustment, optimize_pose, residuals
 from .orb import Features, ORBConfig, extract
@@ -197,7 +198,7 @@ class FeatureTracker:
         with stage("orb"):
             feats = extract(frame.gray, frame.depth, self.config.orb, exclude)
         if not self.keyframes:
-            self._add_keyframe(frame.index, np.eye(4), feats, np.zeros(0, int), np.zeros(0, int),
+            self._add_keyframe(frame, np.eye(4), feats, np.zeros(0, int), np.zeros(0, int),
                                np.ones(0), np.zeros(len(feats), bool))
             self._record(np.eye(4))
             return TrackedFrame(frame.index, feats, np.zeros(0, int), np.zeros(0, int), None, True,
@@ -214,7 +215,7 @@ class FeatureTracker:
                  or self.frames_since_kf >= self.config.keyframe_max_gap)
         if is_kf:
             with stage("keyframe"):
-                self._add_keyframe(frame.index, est.T_c_w, feats, mi, ki, est.weights * est.inliers,
+                self._add_keyframe(frame, est.T_c_w, feats, mi, ki, est.weights * est.inliers,
                                    est.dynamic)
                 self.last_tracked = n_in
             with stage("local_ba"):
@@ -368,8 +369,10 @@ class FeatureTracker:
         T[:3, 3] = tvec.ravel()
         return T
 
-    def _add_keyframe(self, index: int, T_c_w: np.ndarray, feats: Features, map_idx: np.ndarray,
+    def _add_keyframe(self, frame: Frame, T_c_w: np.ndarray, feats: Features, map_idx: np.ndarray,
                       kp_idx: np.ndarray, weights: np.ndarray, dynamic: np.ndarray) -> None:
+        """``frame`` becomes a keyframe at ``T_c_w``: its matched keypoints observe their map
+        points, its new keypoints with depth (not ``dynamic``) become map points."""
         point_ids = -np.ones(len(feats), int)
         w = np.ones(len(feats))
         good = weights > 0
@@ -383,7 +386,7 @@ class FeatureTracker:
             new[np.setdiff1d(far, keep_far)] = False
         P_c = backproject(self.camera, feats.uv[new, 0], feats.uv[new, 1], feats.z[new])
         point_ids[new] = self.map.add(transform_points(invert(T_c_w), P_c), feats.desc[new])
-        self.keyframes.append(Keyframe(index, T_c_w.copy(), feats, point_ids, w))
+        self.keyframes.append(Keyframe(frame.index, T_c_w.copy(), feats, point_ids, w))
         self.frames_since_kf = 0
         if self.last_tracked == 0:
             self.last_tracked = int(new.sum())

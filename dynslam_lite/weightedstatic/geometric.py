@@ -60,10 +60,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .. import checks
-from ..geometry import PinholeCamera, backproject
+from ..geometry import PinholeCamera, backproject, project, transform_points
 
 
 @dataclass
@@ -165,8 +166,6 @@ def weighted_geometric_test(camera: PinholeCamera, R: np.ndarray, t: np.ndarray,
 def nearest_depth(depth: np.ndarray, window: int) -> np.ndarray:
     """(H, W) float32: the nearest valid depth within ``window`` x ``window`` of each pixel
     (inf where none): what :func:`free_space_test` reads in a reference keyframe."""
-    import cv2
-
     d = np.where(depth > 0, depth, np.inf).astype(np.float32)
     return cv2.erode(d, np.ones((window, window), np.uint8), borderType=cv2.BORDER_REPLICATE)
 
@@ -189,19 +188,15 @@ def free_space_test(camera: PinholeCamera, T_ref_cur: np.ndarray, uv_cur: np.nda
     the map for a frame or two, so the keyframes that could expose its motion never observed it.
     """
     H, W = ref_nearest.shape
-    out = np.full(len(uv_cur), np.nan)
-    ok = z_cur > 0
-    X = backproject(camera, uv_cur[ok, 0], uv_cur[ok, 1], z_cur[ok]) @ T_ref_cur[:3, :3].T + T_ref_cur[:3, 3]
+    score = np.full(len(uv_cur), np.nan)
+    ok = np.flatnonzero(z_cur > 0)
+    X = transform_points(T_ref_cur, backproject(camera, uv_cur[ok, 0], uv_cur[ok, 1], z_cur[ok]))
+    u, v = project(camera, X)
     z_r = X[:, 2]
     front = z_r > 0.05
-    u = np.full(len(X), -1, np.int64)
-    v = np.full(len(X), -1, np.int64)
-    u[front] = np.rint(camera.fx * X[front, 0] / z_r[front] + camera.cx)
-    v[front] = np.rint(camera.fy * X[front, 1] / z_r[front] + camera.cy)
-    inside = front & (u >= 0) & (u < W) & (v >= 0) & (v < H)
-    score = np.full(len(X), np.nan)
-    near = ref_nearest[v[inside], u[inside]]
-    zi = z_r[inside]
-    score[inside] = np.where(np.isfinite(near), np.maximum(near - zi, 0.0) / zi, np.nan)
-    out[ok] = score
-    return out
+    ui, vi = np.rint(u[front]).astype(np.int64), np.rint(v[front]).astype(np.int64)
+    inside = (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
+    ok, z_r, ui, vi = ok[front][inside], z_r[front][inside], ui[inside], vi[inside]
+    near = ref_nearest[vi, ui]
+    score[ok] = np.where(np.isfinite(near), np.maximum(near - z_r, 0.0) / z_r, np.nan)
+    return score

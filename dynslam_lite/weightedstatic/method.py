@@ -77,25 +77,20 @@ class WeightedStaticTracker(FeatureTracker):
     def __init__(self, camera, config: WeightedStaticConfig):
         self.paper = config
         self.nearest: dict[int, np.ndarray] = {}  # keyframe index -> nearest-depth image
-        self._depth = None
         super().__init__(camera, config.frontend)
 
-    def reference_keyframes(self, map_idx: np.ndarray, candidates: int = 20) -> list[int]:
+    def reference_keyframes(self, map_idx: np.ndarray, candidates: int = REFERENCE_CANDIDATES) -> list[int]:
         """Indices of the keyframes (among the latest ``candidates``) sharing most of the points."""
         first = max(0, len(self.keyframes) - candidates)
         shared = [np.isin(kf.point_ids, map_idx).sum() for kf in self.keyframes[first:]]
         order = np.argsort(-np.asarray(shared), kind="stable")[: self.paper.geometric.reference_keyframes]
         return [first + int(i) for i in order if shared[i] > 0]
 
-    def process(self, frame, exclude=None, timer=None, T_init=None):
-        self._depth = frame.depth  # for the keyframe's depth image (free-space test)
-        return super().process(frame, exclude, timer, T_init)
-
-    def _add_keyframe(self, index, T_c_w, feats, map_idx, kp_idx, weights, dynamic) -> None:
-        super()._add_keyframe(index, T_c_w, feats, map_idx, kp_idx, weights, dynamic)
+    def _add_keyframe(self, frame, T_c_w, feats, map_idx, kp_idx, weights, dynamic) -> None:
+        super()._add_keyframe(frame, T_c_w, feats, map_idx, kp_idx, weights, dynamic)
         if self.paper.geometric.free_space:  # the latest keyframes' nearest-depth images
             k = len(self.keyframes) - 1
-            self.nearest[k] = nearest_depth(self._depth, self.paper.geometric.free_space_window)
+            self.nearest[k] = nearest_depth(frame.depth, self.paper.geometric.free_space_window)
             self.nearest.pop(k - self.REFERENCE_CANDIDATES, None)
 
     def geometric_scores(self, feats, map_idx: np.ndarray, kp_idx: np.ndarray,
@@ -105,7 +100,7 @@ class WeightedStaticTracker(FeatureTracker):
         A reference observing the match's map point scores it by eq. 4; one that does not, by
         the free-space test against its depth image (``geometric.free_space``, ours)."""
         cfg = self.paper.geometric
-        refs = self.reference_keyframes(map_idx, self.REFERENCE_CANDIDATES)
+        refs = self.reference_keyframes(map_idx)
         delta = np.full((len(map_idx), max(len(refs), 1)), np.nan)
         for r, k in enumerate(refs):
             kf = self.keyframes[k]
