@@ -100,16 +100,24 @@ BG_NO_RESTORE = _run("bgrestore[no-restore]", "bgrestore", "oracle", "removal wi
 BG_ADJACENT = Run("bgrestore[adjacent]", "bgrestore", "oracle", (("removal.frame_gap", 1),),
                   "the paper's adjacent frames for the epipolar vote")
 BG_NONE = _run("bgrestore[none]", "bgrestore", "none", "no masks (removes nothing)")
+BG_ALL_VIEWS = Run("bgrestore[all-views]", "bgrestore", "oracle", (("views", 0),),
+                   "every keyframe restores every hole pixel (eq. 9 as printed; default: the newest 2 that reach it)")
 
 # the object scenes (carried, pushed, still and crowding objects): what each step adds over masks
 STATIC_ORB_CONSISTENT = Run("static-orb[oracle,consistent]", "static-orb", "oracle", (("consistent_pose", True),),
                             "masks only, pose on the PnP-RANSAC-consistent matches (ours)")
 WS_EQ4 = Run("weightedstatic[eq4-only]", "weightedstatic", SEMANTIC, (("geometric.free_space", False),),
              "masks + geometric test + weights, eq. 4 only: no free-space test against references without the point")
+WS_NO_DILATE = Run("weightedstatic[no-dilation]", "weightedstatic", SEMANTIC, (("frontend.mask_dilate_px", 0),),
+                   "masks + geometric test + weights, masks as the source gives them (not dilated by 10 px)")
+WS_NO_SCREEN = Run("weightedstatic[no-screening]", "weightedstatic", SEMANTIC, (("geometric.screen_new_points", False),),
+                   "masks + geometric test + weights, every new keypoint with depth becomes a map point")
 WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("frontend.consistent_pose", False),),
                      "masks + geometric test + weights, first pose by ORB-SLAM2's optimisation")
 BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", SEMANTIC, (("frontend.consistent_pose", True),),
                     "paper C with the pose on the PnP-RANSAC-consistent matches (ours)")
+BG_INSTANCES = Run("bgrestore[instances-only]", "bgrestore", SEMANTIC, (("removal.drop_unsegmented", False),),
+                   "paper C as printed: only instances voted on, every match outside them tracked")
 BG_ALL = _run("bgrestore[oracle:all]", "bgrestore", "oracle:all",
               "every object instance voted on (paper C's Mask R-CNN classes), not people only")
 STATIC_ORB_MOVING = _run("static-orb[oracle:moving]", "static-orb", "oracle:moving",
@@ -148,8 +156,8 @@ class RunSet:
 
 # our object scenes: masks alone, with the consistent pose, paper B, paper C (person-only and all-class
 # masks), and the truth's moving-object masks as the bound
-OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FIRST, WS_EQ4, WEIGHTEDSTATIC, BGRESTORE,
-               BG_CONSISTENT, BG_ALL, STATIC_ORB_MOVING)
+OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FIRST, WS_EQ4, WS_NO_DILATE,
+               WS_NO_SCREEN, WEIGHTEDSTATIC, BG_INSTANCES, BGRESTORE, BG_CONSISTENT, BG_ALL, STATIC_ORB_MOVING)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
     RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),
@@ -163,12 +171,13 @@ RUN_SETS = (
     RunSet("paper B ablation", (STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, WS_DEGRADED_GEOMETRY, WS_DEGRADED_WEIGHTS,
                                 WS_DEGRADED, WS_NONE), scenes=("walking_xyz", "walking_rpy")),
     RunSet("paper C", (BGRESTORE,), scenes=WALKING),  # paper C's tables cover the walking scenes
-    RunSet("paper C ablation", (BG_NO_RESTORE, BG_ADJACENT), scenes=("walking_xyz",)),
+    RunSet("paper C ablation", (BG_NO_RESTORE, BG_ADJACENT, BG_ALL_VIEWS), scenes=("walking_xyz",)),
     # our object scenes: papers B and C where people carry and push things, stand still, crowd
     RunSet("object scenes", OBJECT_ROWS, scenes=OBJECT_SCENES),
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
-                         STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT, WS_EQ4), real=True),
+                         STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT, WS_EQ4, BG_INSTANCES, WS_NO_DILATE,
+                         WS_NO_SCREEN), real=True),
     RunSet("paper A ablation on real data", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT), real=True),
     RunSet("sensitivity on real data", SENSITIVITY, real=True),
 )

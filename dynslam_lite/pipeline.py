@@ -73,7 +73,7 @@ class RunResult:
     extras : the method's own statistics (:meth:`Method.extras`)
     scores : the method's verdicts against ground truth, pooled over the frames that have it:
         'pixels/NAME' (moving-pixel masks) and 'points/NAME' (dynamic keypoints), see :class:`Labels`
-    scored_points : keypoints scored in 'points/...'
+    scored_points : keypoints scored in the 'points/...' sets judged on ``Labels.uv``
     """
 
     method: str
@@ -134,11 +134,11 @@ class _Scorer:
             return
         for name, mask in labels.masks.items():
             self._add(f"pixels/{name}", confusion(mask, frame.mask))
-        if labels.points:
-            truth = sample_nearest(frame.mask, labels.uv)
-            self.points += len(truth)
-            for name, dynamic in labels.points.items():
-                self._add(f"points/{name}", confusion(dynamic, truth))
+        if labels.uv is not None and any(name not in labels.point_uv for name in labels.points):
+            self.points += len(labels.uv)  # the keypoints of the shared set
+        for name, dynamic in labels.points.items():
+            truth = sample_nearest(frame.mask, labels.point_uv.get(name, labels.uv))
+            self._add(f"points/{name}", confusion(dynamic, truth))
 
     def _add(self, key: str, c: np.ndarray) -> None:
         self.counts[key] = self.counts.get(key, 0) + c

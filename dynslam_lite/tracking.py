@@ -27,12 +27,14 @@ class Labels:
     masks : name -> (H, W) bool, pixels judged moving
     uv : (N, 2) float pixel positions of the keypoints judged in ``points``, or None
     points : name -> (N,) bool, keypoints judged dynamic
+    point_uv : name -> (M, 2) positions of a set of ``points`` judged on other keypoints than ``uv``
     """
 
     frame: int
     masks: dict[str, np.ndarray] = field(default_factory=dict)
     uv: np.ndarray | None = None
     points: dict[str, np.ndarray] = field(default_factory=dict)
+    point_uv: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass

@@ -8,9 +8,10 @@ import pytest
 from dynslam_lite.bgrestore import (KeyframeImage, RemovalConfig, decide_removal, fill_depth_hole, grow_region,
                                     otsu3, restore_from_keyframes, splat)
 from dynslam_lite.bgrestore.depthfill import flood_region
+from dynslam_lite.bgrestore.removal import points_mask
 from dynslam_lite.evaluation import evaluate, psnr
 from dynslam_lite.features import Features
-from dynslam_lite.geometry import PinholeCamera, project, se3_exp
+from dynslam_lite.geometry import PinholeCamera, project, sample_nearest, se3_exp
 from dynslam_lite.io import open_sequence
 from dynslam_lite.pipeline import run_method
 from dynslam_lite.synth.generator import T0, SceneRenderer, _timestamps
@@ -99,7 +100,9 @@ def test_splat_weights_are_unit_square_overlaps():
 CAM = PinholeCamera(525.0, 525.0, 319.5, 239.5, 640, 480)
 
 
-def test_instance_with_moving_points_is_removed_and_the_still_one_kept():
+def _two_objects():
+    """Matches between two views of 600 static points, of which those in box A (left) moved 8 cm
+    off their epipolar lines and those in box B (right) stood still; a mask per box."""
     rng = np.random.default_rng(3)
     P = np.column_stack([rng.uniform(-2, 2, 600), rng.uniform(-1.5, 1.5, 600), rng.uniform(2, 5, 600)])
     T = se3_exp([0.06, 0.01, 0.02, 0.01, -0.02, 0.0])  # current <- previous camera
@@ -109,7 +112,7 @@ def test_instance_with_moving_points_is_removed_and_the_still_one_kept():
     box_a = (uv_cur[:, 0] > 100) & (uv_cur[:, 0] < 220) & (uv_cur[:, 1] > 100) & (uv_cur[:, 1] < 380)
     box_b = (uv_cur[:, 0] > 420) & (uv_cur[:, 0] < 540) & (uv_cur[:, 1] > 100) & (uv_cur[:, 1] < 380)
     moved = P_cur.copy()
-    moved[box_a] += [0.0, 0.08, 0.0]  # person A walked 8 cm (off the epipolar lines); B stood still
+    moved[box_a] += [0.0, 0.08, 0.0]
     uv_cur = np.column_stack(project(CAM, moved)) + rng.normal(0, 0.2, (600, 2))
     desc = rng.integers(0, 256, (600, 32), dtype=np.uint8)
 
@@ -123,14 +126,38 @@ def test_instance_with_moving_points_is_removed_and_the_still_one_kept():
         x1, y1 = np.ceil(uv_cur[box].max(axis=0)).astype(int) + 3
         m[y0:y1, x0:x1] = 1
         masks.append(m > 0)
-    r = decide_removal(masks, feats(uv_prev), feats(uv_cur), (480, 640), RemovalConfig(dilate_px=5))
+    return feats(uv_prev), feats(uv_cur), box_a, box_b, masks
+
+
+def test_instance_with_moving_points_is_removed_and_the_still_one_kept():
+    prev, cur, box_a, _, masks = _two_objects()  # person A walked, B stood still
+    r = decide_removal(masks, prev, cur, (480, 640), RemovalConfig(dilate_px=5))
     assert r.removed == [True, False], r.votes
     dyn_a, n_a = r.votes[0]
     assert n_a >= box_a.sum() and dyn_a > 0.8 * n_a and r.votes[1][0] < 0.1 * r.votes[1][1]
     assert r.mask[masks[0]].all() and not r.mask[masks[1] & ~cv2.dilate(masks[0].astype(np.uint8), np.ones((13, 13))).astype(bool)].any()
+    assert len(r.unsegmented) < 0.05 * (~box_a).sum()  # the static points outside the instances stay
 
 
-def test_restoration_recovers_the_true_background_better_than_telea():
+def test_moving_points_of_an_unsegmented_object_are_not_tracked():
+    prev, cur, box_a, box_b, masks = _two_objects()  # A: a carried board no instance covers
+    r = decide_removal([masks[1]], prev, cur, (480, 640), RemovalConfig())
+    assert r.removed == [False]
+    dropped = sample_nearest(points_mask(r.unsegmented, (480, 640), 1), cur.uv)
+    assert dropped[box_a].mean() > 0.9 and dropped[~box_a].mean() < 0.05, (dropped[box_a].mean(), dropped[~box_a].mean())
+    off = decide_removal([masks[1]], prev, cur, (480, 640), RemovalConfig(drop_unsegmented=False))
+    assert len(off.unsegmented) == 0 and off.removed == [False]
+
+
+def test_no_fundamental_matrix_removes_every_instance_and_judges_no_match():
+    prev, cur, _, _, _ = _two_objects()
+    everything = np.ones((480, 640), bool)  # no match outside the instance: F cannot be estimated
+    r = decide_removal([everything], prev, cur, (480, 640), RemovalConfig())
+    assert r.F is None and r.removed == [True] and not r.moved.any() and len(r.unsegmented) == 0
+
+
+@pytest.mark.parametrize("views", [None, 2, 1])
+def test_restoration_recovers_the_true_background_better_than_telea(views):
     r = SceneRenderer("walking_xyz", 0)
     t, _ = _timestamps(40, 0)
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
@@ -145,7 +172,7 @@ def test_restoration_recovers_the_true_background_better_than_telea():
         kfs.append(KeyframeImage(kf_rgb, kf_depth, kf_T, invalid=kf_hole))
     rgb, depth, hole, T = frame(38)
     bg, bg_depth, _, _ = frame(38, people=False)
-    res = restore_from_keyframes(r.camera, rgb, depth, hole, T, kfs)
+    res = restore_from_keyframes(r.camera, rgb, depth, hole, T, kfs, views=views)
     assert res.filled.mean() > 0 and res.filled.sum() > 0.6 * hole.sum()
     assert np.array_equal(res.rgb[~hole], rgb[~hole])  # only the hole is touched
 
@@ -154,6 +181,28 @@ def test_restoration_recovers_the_true_background_better_than_telea():
     assert ours > 25 and ours > theirs + 6, (ours, theirs)  # measured 27.4 vs 18.2 dB
     ok = res.filled & (bg_depth > 0)
     assert np.median(np.abs(res.depth[ok] - bg_depth[ok])) < 0.03
+
+
+def test_views_take_the_newest_keyframes_that_reach_a_pixel():
+    """Two keyframes seeing the same background, the older one green and the newer red: all views
+    average them (eq. 9), one view takes the newer alone."""
+    r = SceneRenderer("walking_xyz", 0)
+    t, _ = _timestamps(20, 0)
+    kf_rgb, kf_depth, kf_m, _ = r.frame(0, t[0] - T0, False)
+    T = r.pose(t[0] - T0)
+    green, red = np.zeros_like(kf_rgb), np.zeros_like(kf_rgb)
+    green[..., 1], red[..., 0] = 200, 200
+    kfs = [KeyframeImage(green, kf_depth, T, np.zeros_like(kf_m)), KeyframeImage(red, kf_depth, T, np.zeros_like(kf_m))]
+    rgb, depth, _, _ = r.frame(10, t[10] - T0, False)
+    hole = np.zeros(depth.shape, bool)
+    hole[200:260, 300:360] = True
+    T_cur = r.pose(t[10] - T0)
+    both = restore_from_keyframes(r.camera, rgb, depth, hole, T_cur, kfs)
+    newest = restore_from_keyframes(r.camera, rgb, depth, hole, T_cur, kfs, views=1)
+    common = both.filled & newest.filled
+    assert common.sum() > 1000
+    np.testing.assert_allclose(both.rgb[common].mean(axis=0), [100, 100, 0], atol=1)
+    np.testing.assert_allclose(newest.rgb[common].mean(axis=0), [200, 0, 0], atol=1)
 
 
 @pytest.mark.slow

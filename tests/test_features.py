@@ -166,3 +166,19 @@ def test_first_keyframe_keeps_far_points_and_later_ones_top_up_to_100():
     tr._add_keyframe(Frame(1, 0.033, rgb, far), np.eye(4), kf.feats, np.zeros(0, int), np.zeros(0, int), np.ones(0),
                      np.zeros(len(kf.feats), bool))
     assert len(tr.map) - n0 == tr.config.min_new_points
+
+
+def test_semantic_masks_are_dilated_before_keypoints_are_dropped():
+    """weightedstatic drops keypoints within 10 px of a mask (a person's outline); static-orb
+    takes the masks as given."""
+    from dynslam_lite.features import FrontendConfig
+    from dynslam_lite.features.method import StaticORBMethod
+    from dynslam_lite.weightedstatic import WeightedStaticConfig, WeightedStaticMethod
+    cam = PinholeCamera(525.0, 525.0, 319.5, 239.5, 640, 480)
+    frame = Frame(0, 0.0, np.zeros((480, 640, 3), np.uint8), np.ones((480, 640), np.float32))
+    person = np.zeros((480, 640), bool)
+    person[100:200, 300:340] = True
+    _, plain, _, _ = StaticORBMethod(cam, FrontendConfig()).prepare(frame, [person], None)
+    _, wide, _, _ = WeightedStaticMethod(cam, WeightedStaticConfig()).prepare(frame, [person], None)
+    assert np.array_equal(plain, person)
+    assert wide[person].all() and wide[95, 320] and wide[150, 349] and not wide[89, 320] and not wide[150, 351]

@@ -26,7 +26,8 @@ FIGURES = {
                                       "B_fig6_trajectory.png"],
     "30_bgrestore_inpainting": ["C_fig3_holes.png", "C_fig3_rgb_restoration.png",
                                 "C_fig4_otsu_region_growing.png", "C_fig5_depth_restoration.png",
-                                "C_fig6_matches.png", "C_fig7_fig8_trajectory_errors.png"],
+                                "C_fig6_matches.png", "C_fig7_fig8_trajectory_errors.png",
+                                "C_unsegmented_objects.png"],
     "90_results_tables": ["summary_ate.png"],
 }
 

@@ -153,3 +153,21 @@ def test_free_space_test_flags_a_point_the_reference_saw_through_and_nothing_els
     hole = np.array([[120.0, 230.0]])
     none = free_space_test(CAM, np.eye(4), np.vstack([hole, hole]), np.array([0.0, 3.0]), nearest_depth(depth_ref, 5))
     assert np.isnan(none).all()
+
+
+def test_new_keypoints_on_a_carried_board_are_kept_out_of_the_map(scene):
+    """walking_carry opens with a board carried across the view: the free-space test keeps its new
+    keypoints from becoming map points (measured on 30 frames: precision 1.00, recall 0.90), so
+    far fewer of the board's points are matched later (45 against 168 without the screening)."""
+    seq = open_sequence(scene("walking_carry", 30))
+    on = run_method("weightedstatic", seq, masks="oracle")
+    off = run_method("weightedstatic", seq, {"geometric.screen_new_points": False}, masks="oracle")
+    new = on.scores["points/new"]
+    assert new.precision > 0.9 and new.recall > 0.8, new
+    assert "points/new" not in off.scores
+
+    def moving_matches(r):
+        g = r.scores["points/geometric"]
+        return g.tp + g.fn
+
+    assert moving_matches(on) < 0.5 * moving_matches(off), (moving_matches(on), moving_matches(off))

@@ -230,7 +230,6 @@ def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
     values = np.zeros((H + 2) * Wp, np.float32)
     values.reshape(H + 2, Wp)[1:-1, 1:-1] = out
     shifts = np.array([dy * Wp + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
-    total, count = np.zeros_like(values, np.float64), np.zeros_like(values, np.float64)
     front = np.flatnonzero(np.pad(layer, 1).ravel())
     while front.size:
         target = (front[None, :] + shifts[:, None]).ravel()
@@ -238,11 +237,9 @@ def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
         if not keep.any():
             break
         target, src = target[keep], np.tile(front, len(shifts))[keep]
-        np.add.at(total, target, values[src])  # sums in the order of the entries, as bincount
-        np.add.at(count, target, 1.0)
-        front = np.unique(target)
-        values[front] = (total[front] / count[front]).astype(np.float32)
-        total[front] = count[front] = 0.0
+        front, slot = np.unique(target, return_inverse=True)
+        total = np.bincount(slot, values[src].astype(np.float64), len(front))  # in the order of the entries
+        values[front] = (total / np.bincount(slot, None, len(front))).astype(np.float32)
         open_[front] = False
     out[:] = values.reshape(H + 2, Wp)[1:-1, 1:-1]
     todo[:] = open_.reshape(H + 2, Wp)[1:-1, 1:-1]

@@ -20,7 +20,7 @@ paper's F -> E -> (R, t) route beside it.
 
 Vectorised: the projection of every keyframe pixel is one matrix product, the splat is one
 ``np.bincount`` per channel over the four corners of every point, on the hole's bounding box; a
-coarse pass on every 8th pixel first finds the part of each keyframe's blocks that can land in
+coarse pass on every 4th pixel first finds the part of each keyframe's blocks that can land in
 the hole, so only those are projected at full resolution.
 """
 from __future__ import annotations
@@ -122,7 +122,7 @@ def _ray_factor(n: int, c: float, f: float) -> np.ndarray:
     return out
 
 
-def _candidates(camera, kf, T_cur_kf, reach: np.ndarray, coarse: int = 8) -> np.ndarray | None:
+def _candidates(camera, kf, T_cur_kf, reach: np.ndarray, coarse: int = 4) -> np.ndarray | None:
     """(H, W) bool, the keyframe pixels that can land in the hole: a coarse pass moves every
     ``coarse``-th pixel, a block of ``coarse`` x ``coarse`` pixels is kept when its sample lands
     in ``reach`` (the hole widened by a margin), and so are its 8 neighbour blocks. None: no
@@ -197,8 +197,9 @@ def _touches_box(x, y, box) -> np.ndarray:
 def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.ndarray, hole: np.ndarray,
                            T_w_cur: np.ndarray, keyframes: list[KeyframeImage],
                            min_weight: float = 0.25, depth_tolerance: float = 0.05,
-                           reach_px: int = 16) -> Restoration:
-    """Fill ``hole`` of the current (rgb, depth) from ``keyframes`` (the paper uses the latest 20).
+                           reach_px: int = 8, views: int | None = None) -> Restoration:
+    """Fill ``hole`` of the current (rgb, depth) from ``keyframes`` (the paper uses the latest 20),
+    given oldest first.
 
     Pixels outside the hole are returned unchanged; hole pixels reached by less than
     ``min_weight`` of splat weight keep their value and are not marked filled. Where keyframe
@@ -207,6 +208,9 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
     foreground edge seen from another keyframe would bleed into the background behind it.
     Only the keyframe pixels near those whose coarse samples land within ``reach_px`` of the
     hole are moved at full resolution (:func:`_candidates`).
+
+    ``views`` (ours): each hole pixel takes the newest ``views`` keyframes that reach it, and the
+    keyframes stop once every hole pixel has them (None: every keyframe, eq. 9 as printed).
     """
     checks.rgb8("rgb", rgb)
     checks.depth("depth", depth, rgb.shape[:2])
@@ -217,10 +221,12 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
     pts = []
     if box is not None:
         T_cur_w = np.linalg.inv(T_w_cur)
-        hole8 = hole.astype(np.uint8)
-        near_hole = cv2.dilate(hole8, np.ones((3, 3), np.uint8)) > 0
-        reach = cv2.dilate(hole8, np.ones((2 * reach_px + 1, 2 * reach_px + 1), np.uint8)) > 0
-        for kf in keyframes:
+        near_hole = cv2.dilate(hole.astype(np.uint8), np.ones((3, 3), np.uint8)).ravel() > 0
+        wanting = hole.astype(np.uint8)  # hole pixels that still take views
+        count = np.zeros(H * W, np.uint8)  # keyframes that reached each pixel
+        widen = np.ones((2 * reach_px + 1, 2 * reach_px + 1), np.uint8)
+        reach = cv2.dilate(wanting, widen) > 0
+        for kf in keyframes[::-1]:  # newest first
             T = T_cur_w @ kf.T_w_c
             use = _candidates(camera, kf, T, reach)
             if use is None:
@@ -228,12 +234,23 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
             x, y, zc, index = _project(camera, kf, T, use)
             xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
             land = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
-            land[land] = near_hole[yi[land], xi[land]]
+            pix = np.where(land, yi * W + xi, 0)
+            land &= near_hole[pix]
+            if views is not None:
+                land &= count[pix] < views
             k = np.flatnonzero(land)
             vals = np.empty((4, k.size), np.float32)  # r, g, b, depth in the current camera
             vals[:3] = np.take(kf.rgb.reshape(-1, 3), index[k], axis=0).T
             vals[3] = zc[k]
-            pts.append((x[k], y[k], yi[k] * W + xi[k], vals))
+            pts.append((x[k], y[k], pix[k], vals))
+            if views is not None:
+                seen = np.zeros(H * W, bool)
+                seen[pix[k]] = True
+                count += seen
+                wanting = (hole & (count.reshape(H, W) < views)).astype(np.uint8)
+                if not wanting.any():
+                    break
+                reach = cv2.dilate(wanting, widen) > 0
     out_rgb, out_depth = rgb.copy(), depth.copy()
     wsum = np.zeros((H, W), np.float32)
     filled = np.zeros((H, W), bool)

@@ -9,7 +9,7 @@ Per frame:
    restored colour and depth) at that pose (:mod:`.inpaint`);
 3. depth left unrestored filled by region growing with 3-class Otsu thresholds (:mod:`.depthfill`);
 4. tracking on the restored frame: keypoints anywhere except the part of the removed region no
-   keyframe could restore.
+   keyframe could restore and the dynamic matches outside every instance (ours, see :mod:`.removal`).
 
 A new keyframe lends later restorations only what its camera saw outside every semantic instance,
 kept or removed (dilated like the removed ones). Ours, measured: lending its own restorations, or
@@ -30,7 +30,7 @@ from ..imageops import dilate, union
 from ..tracking import Labels, Tracked
 from .depthfill import fill_depth_hole
 from .inpaint import KeyframeImage, restore_from_keyframes
-from .removal import Removal, RemovalConfig, decide_removal
+from .removal import Removal, RemovalConfig, decide_removal, points_mask
 
 
 @dataclass
@@ -42,6 +42,8 @@ class BgRestoreConfig:
     frontend : the shared feature frontend, see :class:`FrontendConfig`
     removal : semantic + epipolar removal, see :class:`RemovalConfig`
     keyframes : number of latest keyframes mapped into the holes (20)
+    views : each hole pixel restored from the newest this many keyframes that reach it (ours,
+        for speed; 0: all of them, eq. 9 as printed)
     restore : False skips steps 2-3 (removal only: ablation)
     fill_depth : False skips the region growing (step 3)
     depth_z_max : metres mapped to grey 255 for the region growing (8-bit depth, Td = 6)
@@ -51,6 +53,7 @@ class BgRestoreConfig:
     frontend: FrontendConfig = field(default_factory=FrontendConfig)
     removal: RemovalConfig = field(default_factory=RemovalConfig)
     keyframes: int = 20
+    views: int = 2
     restore: bool = True
     fill_depth: bool = True
     depth_z_max: float = 8.0
@@ -78,7 +81,8 @@ class FrameRestoration:
 
 class BgRestoreMethod(FrontendMethod):
     """Method ``bgrestore``. Each frame's detail is its :class:`FrameRestoration`, its labels the
-    removed region ('removed'); ``extras`` reports how much of the removed area was restored."""
+    removed region ('removed') and the matches outside every instance judged dynamic ('moved');
+    ``extras`` reports how much of the removed area was restored."""
 
     name = "bgrestore"
     config_type = BgRestoreConfig
@@ -106,19 +110,20 @@ class BgRestoreMethod(FrontendMethod):
             removal = decide_removal(instances, prev, feats, frame.depth.shape, cfg.removal)
             self.past_feats.append(feats)
         hole = removal.mask
+        moved = points_mask(removal.unsegmented, hole.shape, cfg.removal.point_px)
         restored = np.zeros_like(hole)
         grown = np.zeros_like(hole)
         rgb, depth = frame.rgb, frame.depth
         T_init = None
         if cfg.restore and hole.any() and self.tracker.keyframes:
             # a trial pose from the keypoints outside the hole places the keyframes' pixels
-            static = feats.subset(~sample_nearest(hole, feats.uv))
+            static = feats.subset(~sample_nearest(hole | moved, feats.uv))
             T_pred = self.tracker.predict()
             _, _, est, _, reason = self.tracker.locate(frame, static, T_pred, timer, count=False)
             T_init = est.T_c_w if est is not None and not reason else T_pred
             with timer.stage("inpaint"):
                 res = restore_from_keyframes(self.camera, rgb, depth, hole, invert(T_init),
-                                             self._keyframe_images())
+                                             self._keyframe_images(), views=cfg.views or None)
                 rgb, depth, restored = res.rgb, res.depth, res.filled
             if cfg.fill_depth and (hole & ~restored).any():
                 with timer.stage("depth_fill"):
@@ -128,7 +133,7 @@ class BgRestoreMethod(FrontendMethod):
         left = hole & ~restored  # no keyframe saw behind: no keypoints there
         depth = np.where(left & ~grown, 0.0, depth).astype(np.float32)
         record = (instances, FrameRestoration(removal, restored, grown, rgb, depth), left)
-        return replace(frame, rgb=rgb, depth=depth), left, T_init, record
+        return replace(frame, rgb=rgb, depth=depth), left | moved, T_init, record
 
     def tracked(self, frame, tf, record) -> Tracked:
         instances, rec, left = record
@@ -140,8 +145,9 @@ class BgRestoreMethod(FrontendMethod):
             for k in [k for k in self.kf_images if k < n - self.config.keyframes]:  # only the latest are used
                 del self.kf_images[k]
         self.area += [rec.removal.mask.sum(), rec.restored.sum(), rec.grown.sum()]
-        return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe,
-                       Labels(frame.index, {"removed": rec.removal.mask}), rec)
+        rem = rec.removal  # scored: the removed pixels, and the matches outside every instance
+        labels = Labels(frame.index, {"removed": rem.mask}, rem.uv_cur[rem.outside], {"moved": rem.moved[rem.outside]})
+        return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe, labels, rec)
 
     def extras(self) -> dict:
         out = super().extras()

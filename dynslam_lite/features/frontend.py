@@ -66,6 +66,8 @@ class FrontendConfig:
         where it was visible (after ``cull_min_visible`` of them) is removed
     consistent_pose : the pose step optimises on the matches PnP-RANSAC finds consistent
         (:meth:`FeatureTracker.consistent_pose`; ours, off = ORB-SLAM2's pose optimisation)
+    mask_dilate_px : the semantic masks are dilated by this radius before keypoints inside them
+        are dropped (0: as the mask source gives them)
     """
 
     orb: ORBConfig = field(default_factory=ORBConfig)
@@ -84,6 +86,7 @@ class FrontendConfig:
     cull_ratio: float = 0.25
     cull_min_visible: int = 4
     consistent_pose: bool = False
+    mask_dilate_px: int = 0
 
 
 class PointMap:

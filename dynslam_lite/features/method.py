@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import invert
-from ..imageops import union
+from ..imageops import dilate, union
 from ..masks import NoMasks
 from ..timing import StageTimer
 from ..tracking import Method, Tracked
@@ -45,8 +45,9 @@ class FrontendMethod(Method):
 
     def prepare(self, frame, instances: list[np.ndarray], timer: StageTimer):
         """(frame the frontend tracks, (H, W) bool keypoint exclusion or None, start pose or None,
-        record for :meth:`tracked`): here the frame as it is, without keypoints in the masks."""
-        return frame, union(instances), None, None
+        record for :meth:`tracked`): here the frame as it is, without keypoints in the (dilated) masks."""
+        people = union(instances)
+        return frame, None if people is None else dilate(people, self.tracker.config.mask_dilate_px), None, None
 
     def tracked(self, frame, tf: TrackedFrame, record) -> Tracked:
         """What the runner gets for ``frame``; the detail is the frontend's :class:`TrackedFrame`."""

@@ -82,6 +82,8 @@ class GeometricConfig:
     free_space : a reference keyframe that has no observation of the point tests it by its depth
         image (:func:`free_space_test`; ours, False = such a reference gives no verdict)
     free_space_window : side of the window whose nearest depth the free-space test compares (px)
+    screen_new_points : a keyframe's new keypoint becomes a map point only if the free-space test
+        against the references passes (ours, with ``free_space``)
     """
 
     sigma1: float = 0.005
@@ -91,6 +93,7 @@ class GeometricConfig:
     along_line: bool = False
     free_space: bool = True
     free_space_window: int = 5
+    screen_new_points: bool = True
 
 
 def rays(camera: PinholeCamera, uv: np.ndarray) -> np.ndarray:
