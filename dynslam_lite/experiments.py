@@ -108,15 +108,18 @@ STATIC_ORB_CONSISTENT = Run("static-orb[oracle,consistent]", "static-orb", "orac
                             "masks only, pose on the PnP-RANSAC-consistent matches (ours)")
 WS_EQ4 = Run("weightedstatic[eq4-only]", "weightedstatic", SEMANTIC, (("geometric.free_space", False),),
              "masks + geometric test + weights, eq. 4 only: no free-space test against references without the point")
-WS_NO_DILATE = Run("weightedstatic[no-dilation]", "weightedstatic", SEMANTIC, (("frontend.mask_dilate_px", 0),),
+WS_NO_DILATE = Run("weightedstatic[no-dilation]", "weightedstatic", SEMANTIC,
+                   (("frontend.mask_dilate_px", 0),),
                    "masks + geometric test + weights, masks as the source gives them (not dilated by 10 px)")
-WS_NO_SCREEN = Run("weightedstatic[no-screening]", "weightedstatic", SEMANTIC, (("geometric.screen_new_points", False),),
+WS_NO_SCREEN = Run("weightedstatic[no-screening]", "weightedstatic", SEMANTIC,
+                   (("geometric.screen_new_points", False),),
                    "masks + geometric test + weights, every new keypoint with depth becomes a map point")
 WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("frontend.consistent_pose", False),),
                      "masks + geometric test + weights, first pose by ORB-SLAM2's optimisation")
 BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", SEMANTIC, (("frontend.consistent_pose", True),),
                     "paper C with the pose on the PnP-RANSAC-consistent matches (ours)")
-BG_INSTANCES = Run("bgrestore[instances-only]", "bgrestore", SEMANTIC, (("removal.drop_unsegmented", False),),
+BG_INSTANCES = Run("bgrestore[instances-only]", "bgrestore", SEMANTIC,
+                   (("removal.drop_unsegmented", False),),
                    "paper C as printed: only instances voted on, every match outside them tracked")
 BG_ALL = _run("bgrestore[oracle:all]", "bgrestore", "oracle:all",
               "every object instance voted on (paper C's Mask R-CNN classes), not people only")
