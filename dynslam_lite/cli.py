@@ -87,7 +87,10 @@ def cmd_bench(a) -> int:
     """Print ms/frame per stage of every method on the same frames, and the generator's rate.
 
     A stage that runs on some frames only (later background updates) is averaged over the
-    frames that ran it; 'frames' says how many.
+    frames that ran it; 'frames' says how many. With ``--repeat N`` the methods run N rounds,
+    each round in a rotated order; the stages are those of the first round, the ratio to
+    opencv-odometry is taken within each round (the same minutes of a shared machine) and its
+    median and range over the rounds printed.
     """
     import numpy as np
 
@@ -103,26 +106,34 @@ def cmd_bench(a) -> int:
               f"{a.frames / dt:.2f} frames/s")
         seq = open_sequence(path.path)
     print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s} {'frames':>7s}")
-    without_masks = {}
-    for method in a.methods:
-        run = next(r for r in experiments.MAIN if r.method == method)  # as the tables run it
-        masks = run.mask_source("real" if a.seq else "synthetic")
-        masks = a.masks if a.masks and masks != "none" else masks
-        r = run_method(method, seq, masks=masks)
-        if masks != "none":
-            print(f"{method:18s} (masks {masks})")
-        for stage, ms in r.stage_ms.items():
-            print(f"{method:18s} {stage:10s} {np.mean(ms):9.1f} {np.median(ms):10.1f} {len(ms):7d}")
-        s = r.stats()
-        print(f"{method:18s} {'total':10s} {s['ms_per_frame']:9.1f} {np.median(r.frame_ms):10.1f}"
-              f"   peak memory {s['peak_mem_mib']:.0f} MiB")
-        without_masks[method] = (np.sum(r.frame_ms) - np.sum(r.stage_ms.get("masks", []))) / len(r.frame_ms)
-    if "opencv-odometry" in without_masks:  # speed claims: ratios within this one run
-        ref = without_masks["opencv-odometry"]
+    methods = list(dict.fromkeys(a.methods))
+    without_masks: dict[str, list[float]] = {m: [] for m in methods}  # ms/frame of each round
+    for k in range(max(a.repeat, 1)):
+        for method in methods[k % len(methods):] + methods[:k % len(methods)]:
+            run = next(r for r in experiments.MAIN if r.method == method)  # as the tables run it
+            masks = run.mask_source("real" if a.seq else "synthetic")
+            masks = a.masks if a.masks and masks != "none" else masks
+            r = run_method(method, seq, masks=masks)
+            without_masks[method].append(
+                (np.sum(r.frame_ms) - np.sum(r.stage_ms.get("masks", []))) / len(r.frame_ms))
+            if k:
+                continue
+            if masks != "none":
+                print(f"{method:18s} (masks {masks})")
+            for stage, ms in r.stage_ms.items():
+                print(f"{method:18s} {stage:10s} {np.mean(ms):9.1f} {np.median(ms):10.1f} {len(ms):7d}")
+            s = r.stats()
+            print(f"{method:18s} {'total':10s} {s['ms_per_frame']:9.1f} {np.median(r.frame_ms):10.1f}"
+                  f"   peak memory {s['peak_mem_mib']:.0f} MiB")
+    if "opencv-odometry" in without_masks:  # speed claims: ratios within one round
+        ref = np.asarray(without_masks["opencv-odometry"])
+        n = len(ref)
         print("ms/frame without the mask source (segmentation), and the ratio to opencv-odometry "
-              "on the same frames in this run:")
+              f"on the same frames in this run{f' (median of {n} rounds, range of the ratio)' if n > 1 else ''}:")
         for method, ms in without_masks.items():
-            print(f"{method:18s} {ms:9.1f} ms/frame  {ms / ref:5.2f}x opencv-odometry")
+            ratio = np.asarray(ms) / ref
+            spread = f"  ({ratio.min():.2f}-{ratio.max():.2f})" if n > 1 else ""
+            print(f"{method:18s} {np.median(ms):9.1f} ms/frame  {np.median(ratio):5.2f}x opencv-odometry{spread}")
     return 0
 
 
@@ -184,6 +195,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--frames", type=int, default=60)
     b.add_argument("--camera", default=None)
     b.add_argument("--methods", nargs="+", default=list(BENCHED), choices=sorted(METHODS))
+    b.add_argument("--repeat", type=int, default=1,
+                   help="rounds over the methods, order rotated each round; prints the median ratio")
     b.add_argument("--cache", default=str(batch.DEFAULT_CACHE))
     b.add_argument("--masks", default=None,
                    help="mask source of weightedstatic (default: oracle on the synthetic scene, "

@@ -134,10 +134,12 @@ class _Scorer:
             return
         for name, mask in labels.masks.items():
             self._add(f"pixels/{name}", confusion(mask, frame.mask))
+        shared = None  # the truth at the shared keypoints, sampled once
         if labels.uv is not None and any(name not in labels.point_uv for name in labels.points):
-            self.points += len(labels.uv)  # the keypoints of the shared set
+            self.points += len(labels.uv)
+            shared = sample_nearest(frame.mask, labels.uv)
         for name, dynamic in labels.points.items():
-            truth = sample_nearest(frame.mask, labels.point_uv.get(name, labels.uv))
+            truth = sample_nearest(frame.mask, labels.point_uv[name]) if name in labels.point_uv else shared
             self._add(f"points/{name}", confusion(dynamic, truth))
 
     def _add(self, key: str, c: np.ndarray) -> None:

@@ -231,13 +231,20 @@ def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
     values.reshape(H + 2, Wp)[1:-1, 1:-1] = out
     shifts = np.array([dy * Wp + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx])
     front = np.flatnonzero(np.pad(layer, 1).ravel())
+    slots = np.empty((H + 2) * Wp, np.int64)  # scratch: each target pixel's slot in the next front
     while front.size:
         target = (front[None, :] + shifts[:, None]).ravel()
         keep = open_[target]
         if not keep.any():
             break
         target, src = target[keep], np.tile(front, len(shifts))[keep]
-        front, slot = np.unique(target, return_inverse=True)
+        # np.unique(target, return_inverse=True) without sorting every entry: the one entry of
+        # each pixel that the scatter kept marks it, only the distinct pixels are sorted
+        entry = np.arange(target.size)
+        slots[target] = entry
+        front = np.sort(target[slots[target] == entry])
+        slots[front] = np.arange(front.size)
+        slot = slots[target]
         total = np.bincount(slot, values[src].astype(np.float64), len(front))  # in the order of the entries
         values[front] = (total / np.bincount(slot, None, len(front))).astype(np.float32)
         open_[front] = False

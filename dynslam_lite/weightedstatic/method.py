@@ -102,9 +102,9 @@ class WeightedStaticTracker(FeatureTracker):
             dynamic = dynamic | moved
             self.screened = (feats.uv[cand], moved[cand])  # for the runner's scores
         super()._add_keyframe(frame, T_c_w, feats, map_idx, kp_idx, weights, dynamic)
-        if self.paper.geometric.free_space:  # the latest keyframes' nearest-depth images
+        if cfg.free_space:  # the latest keyframes' nearest-depth images
             k = len(self.keyframes) - 1
-            self.nearest[k] = nearest_depth(frame.depth, self.paper.geometric.free_space_window)
+            self.nearest[k] = nearest_depth(frame.depth, cfg.free_space_window)
             self.nearest.pop(k - self.REFERENCE_CANDIDATES, None)
 
     def moved_new_points(self, feats, map_idx: np.ndarray, kp_idx: np.ndarray,
