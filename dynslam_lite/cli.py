@@ -94,6 +94,8 @@ def cmd_bench(a) -> int:
     """
     import numpy as np
 
+    if a.repeat < 1:
+        raise ConfigError(f"--repeat {a.repeat}: the methods need at least one round")
     cache = Path(a.cache)
     if a.seq:
         seq = open_sequence(a.seq, a.camera, 0, a.frames)
@@ -108,7 +110,7 @@ def cmd_bench(a) -> int:
     print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s} {'frames':>7s}")
     methods = list(dict.fromkeys(a.methods))
     without_masks: dict[str, list[float]] = {m: [] for m in methods}  # ms/frame of each round
-    for k in range(max(a.repeat, 1)):
+    for k in range(a.repeat):
         for method in methods[k % len(methods):] + methods[:k % len(methods)]:
             run = next(r for r in experiments.MAIN if r.method == method)  # as the tables run it
             masks = run.mask_source("real" if a.seq else "synthetic")

@@ -45,6 +45,9 @@ def test_errors_name_the_problem(tmp_path, capsys):
     assert main(["run", "static-dense", str(tmp_path), "--out", str(tmp_path / "t.txt")]) == 2
     assert "rgb.txt: file not found" in capsys.readouterr().err
     assert main(["run", "static-dense", str(tmp_path), "--out", "x", "--set", "bogus"]) == 2
+    capsys.readouterr()
+    assert main(["bench", "--seq", str(tmp_path), "--repeat", "0"]) == 2
+    assert "--repeat 0: the methods need at least one round" in capsys.readouterr().err
     seq = tmp_path / "s"
     main(["synth", str(seq), "--scene", "static_xyz", "--frames", "3", "--quiet"])
     assert main(["run", "static-dense", str(seq), "--out", str(tmp_path / "t.txt"),
