@@ -104,23 +104,29 @@ BG_ALL_VIEWS = Run("bgrestore[all-views]", "bgrestore", "oracle", (("views", 0),
                    "every keyframe restores every hole pixel (eq. 9 as printed; default: the newest 2 that reach it)")
 
 # the object scenes (carried, pushed, still and crowding objects): what each step adds over masks
+_SCREEN = "frontend.screen_new_points"  # the frontend's free-space screening of new keypoints (ours)
 STATIC_ORB_CONSISTENT = Run("static-orb[oracle,consistent]", "static-orb", "oracle", (("consistent_pose", True),),
                             "masks only, pose on the PnP-RANSAC-consistent matches (ours)")
-WS_EQ4 = Run("weightedstatic[eq4-only]", "weightedstatic", SEMANTIC, (("geometric.free_space", False),),
-             "masks + geometric test + weights, eq. 4 only: no free-space test against references without the point")
+WS_EQ4 = Run("weightedstatic[eq4-only]", "weightedstatic", SEMANTIC,
+             (("geometric.free_space", False), (_SCREEN, False)),
+             "masks + geometric test + weights, eq. 4 only: no free-space test (of matches or of new keypoints)")
 WS_NO_DILATE = Run("weightedstatic[no-dilation]", "weightedstatic", SEMANTIC,
                    (("frontend.mask_dilate_px", 0),),
                    "masks + geometric test + weights, masks as the source gives them (not dilated by 10 px)")
 WS_NO_SCREEN = Run("weightedstatic[no-screening]", "weightedstatic", SEMANTIC,
-                   (("geometric.screen_new_points", False),),
+                   ((_SCREEN, False),),
                    "masks + geometric test + weights, every new keypoint with depth becomes a map point")
 WS_PAPER_FIRST = Run("weightedstatic[orb-first-pose]", "weightedstatic", "oracle", (("frontend.consistent_pose", False),),
                      "masks + geometric test + weights, first pose by ORB-SLAM2's optimisation")
 BG_CONSISTENT = Run("bgrestore[consistent]", "bgrestore", SEMANTIC, (("frontend.consistent_pose", True),),
                     "paper C with the pose on the PnP-RANSAC-consistent matches (ours)")
 BG_INSTANCES = Run("bgrestore[instances-only]", "bgrestore", SEMANTIC,
-                   (("removal.drop_unsegmented", False),),
-                   "paper C as printed: only instances voted on, every match outside them tracked")
+                   (("removal.drop_unsegmented", False), (_SCREEN, False)),
+                   "paper C as printed: only instances voted on, every match outside them tracked, "
+                   "every new keypoint a map point")
+BG_NO_SCREEN = Run("bgrestore[no-screening]", "bgrestore", SEMANTIC, ((_SCREEN, False),),
+                   "paper C with our removal of unsegmented matches; every new keypoint with depth "
+                   "becomes a map point")
 BG_ALL = _run("bgrestore[oracle:all]", "bgrestore", "oracle:all",
               "every object instance voted on (paper C's Mask R-CNN classes), not people only")
 STATIC_ORB_MOVING = _run("static-orb[oracle:moving]", "static-orb", "oracle:moving",
@@ -160,7 +166,8 @@ class RunSet:
 # our object scenes: masks alone, with the consistent pose, paper B, paper C (person-only and all-class
 # masks), and the truth's moving-object masks as the bound
 OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FIRST, WS_EQ4, WS_NO_DILATE,
-               WS_NO_SCREEN, WEIGHTEDSTATIC, BG_INSTANCES, BGRESTORE, BG_CONSISTENT, BG_ALL, STATIC_ORB_MOVING)
+               WS_NO_SCREEN, WEIGHTEDSTATIC, BG_INSTANCES, BG_NO_SCREEN, BGRESTORE, BG_CONSISTENT, BG_ALL,
+               STATIC_ORB_MOVING)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
     RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),
@@ -180,7 +187,7 @@ RUN_SETS = (
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
                          STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT, WS_EQ4, BG_INSTANCES, WS_NO_DILATE,
-                         WS_NO_SCREEN), real=True),
+                         WS_NO_SCREEN, BG_NO_SCREEN), real=True),
     RunSet("paper A ablation on real data", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT), real=True),
     RunSet("sensitivity on real data", SENSITIVITY, real=True),
 )

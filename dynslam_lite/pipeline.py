@@ -206,7 +206,8 @@ def parse_value(text: str) -> Any:
 # parameters that count or size something: at least 1; fractions and ratios: at most 1
 _AT_LEAST_ONE = {"levels", "n_features", "n_levels", "grid_cols", "grid_rows", "rows", "cols", "keyframes",
                  "frame_gap", "reference_keyframes", "local_map_keyframes", "ba_window", "lm_iterations",
-                 "keyframe_max_gap", "max_clusters", "scale_factor", "region_td"}
+                 "keyframe_max_gap", "max_clusters", "scale_factor", "region_td", "screen_references",
+                 "free_space_window"}
 
 
 def _coerce(key: str, value: Any, hint, default: Any) -> Any:

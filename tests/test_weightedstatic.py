@@ -133,7 +133,7 @@ def test_free_space_test_flags_a_point_the_reference_saw_through_and_nothing_els
     front of that camera, where the reference saw the wall: free space violated, score
     (3 - z_r) / z_r. A wall point, a wall point on the edge of a hole in the reference's depth,
     and a point the reference saw hidden behind something nearer score 0 (or no verdict)."""
-    from dynslam_lite.weightedstatic.geometric import free_space_test, nearest_depth
+    from dynslam_lite.features.freespace import free_space_test, nearest_depth
 
     T_cur_ref = se3_exp([0.2, 0.0, 0.0, 0.0, 0.0, 0.0])
     T_ref_cur = invert(T_cur_ref)
@@ -161,7 +161,7 @@ def test_new_keypoints_on_a_carried_board_are_kept_out_of_the_map(scene):
     far fewer of the board's points are matched later (45 against 168 without the screening)."""
     seq = open_sequence(scene("walking_carry", 30))
     on = run_method("weightedstatic", seq, masks="oracle")
-    off = run_method("weightedstatic", seq, {"geometric.screen_new_points": False}, masks="oracle")
+    off = run_method("weightedstatic", seq, {"frontend.screen_new_points": False}, masks="oracle")
     new = on.scores["points/new"]
     assert new.precision > 0.9 and new.recall > 0.8, new
     assert "points/new" not in off.scores

@@ -9,7 +9,10 @@ Per frame:
    restored colour and depth) at that pose (:mod:`.inpaint`);
 3. depth left unrestored filled by region growing with 3-class Otsu thresholds (:mod:`.depthfill`);
 4. tracking on the restored frame: keypoints anywhere except the part of the removed region no
-   keyframe could restore and the dynamic matches outside every instance (ours, see :mod:`.removal`).
+   keyframe could restore and the dynamic matches outside every instance (ours, see :mod:`.removal`);
+   a new keyframe's keypoints that paper B's free-space test finds moved do not become map points
+   (ours, ``frontend.screen_new_points``: a person the mask source misses, a carried or pushed
+   object).
 
 A new keyframe lends later restorations only what its camera saw outside every semantic instance,
 kept or removed (dilated like the removed ones). Ours, measured: lending its own restorations, or
@@ -23,7 +26,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..features import FeatureTracker, FrontendConfig, extract
+from ..features import FrontendConfig, extract
 from ..features.method import FrontendMethod
 from ..geometry import invert, sample_nearest
 from ..imageops import dilate, union
@@ -39,7 +42,12 @@ class BgRestoreConfig:
 
     Attributes
     ----------
-    frontend : the shared feature frontend, see :class:`FrontendConfig`
+    frontend : the shared feature frontend, see :class:`FrontendConfig`; here with
+        ``screen_new_points`` on: a new keyframe's keypoints that the free-space test against the
+        reference keyframes finds moved do not become map points (ours; without it a person the
+        mask source misses while crossing close to the camera enters the map at the next
+        keyframe and is tracked from then on: synthetic crowd with the near person's mask dropped
+        for 12 frames, ATE 0.070 m without, 0.010 with)
     removal : semantic + epipolar removal, see :class:`RemovalConfig`
     keyframes : number of latest keyframes mapped into the holes (20)
     views : each hole pixel restored from the newest this many keyframes that reach it (ours,
@@ -50,7 +58,7 @@ class BgRestoreConfig:
     region_td : the growth step threshold Td on the 8-bit scale (6)
     """
 
-    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    frontend: FrontendConfig = field(default_factory=lambda: FrontendConfig(screen_new_points=True))
     removal: RemovalConfig = field(default_factory=RemovalConfig)
     keyframes: int = 20
     views: int = 2
@@ -81,7 +89,8 @@ class FrameRestoration:
 
 class BgRestoreMethod(FrontendMethod):
     """Method ``bgrestore``. Each frame's detail is its :class:`FrameRestoration`, its labels the
-    removed region ('removed') and the matches outside every instance judged dynamic ('moved');
+    removed region ('removed'), the matches outside every instance judged dynamic ('moved') and a
+    keyframe's new keypoints kept out of the map ('new');
     ``extras`` reports how much of the removed area was restored."""
 
     name = "bgrestore"
@@ -147,6 +156,7 @@ class BgRestoreMethod(FrontendMethod):
         self.area += [rec.removal.mask.sum(), rec.restored.sum(), rec.grown.sum()]
         rem = rec.removal  # scored: the removed pixels, and the matches outside every instance
         labels = Labels(frame.index, {"removed": rem.mask}, rem.uv_cur[rem.outside], {"moved": rem.moved[rem.outside]})
+        labels = self.screened_labels(frame, tf, labels)
         return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe, labels, rec)
 
     def extras(self) -> dict:

@@ -13,7 +13,10 @@ Per frame (ORB-SLAM2's Tracking thread, without loop closing or relocalisation d
 4. keyframe decision (tracked points below 90 % of the last keyframe's, or a maximum gap);
    a keyframe creates map points from its unmatched keypoints with depth and runs local bundle
    adjustment over a window of keyframes; points found in too few of the frames where they
-   were visible are culled.
+   were visible are culled. With ``screen_new_points`` (ours; papers B and C turn it on) a new
+   keypoint becomes a map point only if the free-space test (:mod:`.freespace`) against the
+   reference keyframes passes: a point on a carried board, a pushed box or a person the mask
+   source misses would otherwise be matched in the next frames before anything could test it.
 
 The frame poses are kept relative to their reference keyframe and composed with the final
 keyframe poses at the end (:meth:`FeatureTracker.trajectory`), as ORB-SLAM2 writes its
@@ -32,6 +35,7 @@ import numpy as np
 
 from ..geometry import PinholeCamera, backproject, invert, normalize_pose, project, transform_points
 from ..io import Frame
+from .freespace import free_space_test, nearest_depth
 from .matching import match_descriptors, search_by_projection
 from .optimize import Observations, PoseResult, local_bundle_adjustment, optimize_pose, residuals
 from .orb import Features, ORBConfig, extract
@@ -68,6 +72,13 @@ class FrontendConfig:
         (:meth:`FeatureTracker.consistent_pose`; ours, off = ORB-SLAM2's pose optimisation)
     mask_dilate_px : the semantic masks are dilated by this radius before keypoints inside them
         are dropped (0: as the mask source gives them)
+    screen_new_points : a new keyframe's unmatched keypoints with depth whose median free-space
+        score over the reference keyframes reaches ``screen_threshold`` do not become map points
+        (ours, off = ORB-SLAM2's map point creation)
+    screen_threshold : free-space score (relative depth, paper B's sigma2) of a moved keypoint
+    screen_references : reference keyframes of the screening: those sharing most map points
+        with the frame, among the latest 20
+    free_space_window : side of the window whose nearest depth the free-space test reads (px)
     """
 
     orb: ORBConfig = field(default_factory=ORBConfig)
@@ -87,6 +98,10 @@ class FrontendConfig:
     cull_min_visible: int = 4
     consistent_pose: bool = False
     mask_dilate_px: int = 0
+    screen_new_points: bool = False
+    screen_threshold: float = 0.05
+    screen_references: int = 5
+    free_space_window: int = 5
 
 
 class PointMap:
@@ -172,10 +187,13 @@ class TrackedFrame:
     ok: bool
     reason: str = ""
     keyframe: bool = False
+    screened: tuple[np.ndarray, np.ndarray] | None = None  # a new keyframe's (uv, moved) candidates
 
 
 class FeatureTracker:
     """The frontend. ``process(frame)`` tracks one frame; ``trajectory()`` gives all poses."""
+
+    REFERENCE_CANDIDATES = 20  # reference keyframes are chosen among this many latest keyframes
 
     def __init__(self, camera: PinholeCamera, config: FrontendConfig | None = None):
         self.camera = camera
@@ -188,6 +206,7 @@ class FeatureTracker:
         self.T_before: np.ndarray | None = None
         self.last_tracked = 0
         self.frames_since_kf = 0
+        self.nearest: dict[int, np.ndarray] = {}  # keyframe index -> nearest-depth image
 
     # ------------------------------------------------------------------ per frame
     def process(self, frame, exclude: np.ndarray | None = None, timer=None,
@@ -216,10 +235,11 @@ class FeatureTracker:
         self.frames_since_kf += 1
         is_kf = (n_in < self.config.keyframe_ratio * self.last_tracked
                  or self.frames_since_kf >= self.config.keyframe_max_gap)
+        screened = None
         if is_kf:
             with stage("keyframe"):
-                self._add_keyframe(frame, est.T_c_w, feats, mi, ki, est.weights * est.inliers,
-                                   est.dynamic)
+                screened = self._add_keyframe(frame, est.T_c_w, feats, mi, ki, est.weights * est.inliers,
+                                              est.dynamic)
                 self.last_tracked = n_in
             with stage("local_ba"):
                 self._local_ba()
@@ -227,7 +247,7 @@ class FeatureTracker:
         else:
             T = est.T_c_w
         self._record(T)
-        return TrackedFrame(frame.index, feats, mi, ki, est, True, keyframe=is_kf)
+        return TrackedFrame(frame.index, feats, mi, ki, est, True, keyframe=is_kf, screened=screened)
 
     def locate(self, frame, feats: Features, T_init: np.ndarray, timer=None, count: bool = True):
         """Pose of ``feats`` against the local map: search by projection from ``T_init``, pose,
@@ -298,6 +318,37 @@ class FeatureTracker:
     def observations(self, feats: Features, kp_idx: np.ndarray) -> Observations:
         info = feats.inv_sigma2(self.config.orb.scale_factor)[kp_idx]
         return Observations.of(feats.uv[kp_idx], feats.z[kp_idx], info, self.bf)
+
+    def reference_keyframes(self, map_idx: np.ndarray, n: int) -> list[int]:
+        """Indices of the ``n`` keyframes (among the latest :attr:`REFERENCE_CANDIDATES`) sharing
+        most of the map points ``map_idx``; none that shares no point."""
+        first = max(0, len(self.keyframes) - self.REFERENCE_CANDIDATES)
+        shared = [np.isin(kf.point_ids, map_idx).sum() for kf in self.keyframes[first:]]
+        order = np.argsort(-np.asarray(shared), kind="stable")[:n]
+        return [first + int(i) for i in order if shared[i] > 0]
+
+    def moved_new_points(self, feats: Features, map_idx: np.ndarray, kp_idx: np.ndarray,
+                         T_c_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A new keyframe's keypoints that must not become map points, (N,) bool over ``feats``,
+        and the candidates tested (indices): unmatched keypoints with depth whose median
+        free-space score over the reference keyframes reaches ``screen_threshold``."""
+        cfg = self.config
+        new = np.ones(len(feats), bool)
+        new[kp_idx] = False
+        cand = np.flatnonzero(new & (feats.z > 0))
+        refs = [k for k in self.reference_keyframes(map_idx, cfg.screen_references) if k in self.nearest]
+        out = np.zeros(len(feats), bool)
+        if not refs or not cand.size:
+            return out, cand[:0]
+        score = np.stack([free_space_test(self.camera, self.keyframes[k].T_c_w @ invert(T_c_w), feats.uv[cand],
+                                          feats.z[cand], self.nearest[k]) for k in refs], axis=1)
+        seen = np.isfinite(score).any(axis=1)
+        out[cand[seen]] = np.nanmedian(score[seen], axis=1) >= cfg.screen_threshold
+        return out, cand
+
+    def keeps_nearest_depth(self) -> bool:
+        """Whether keyframes keep the nearest-depth image the free-space test reads."""
+        return self.config.screen_new_points
 
     # ------------------------------------------------------------------ results
     def trajectory(self) -> np.ndarray:
@@ -373,9 +424,15 @@ class FeatureTracker:
         return T
 
     def _add_keyframe(self, frame: Frame, T_c_w: np.ndarray, feats: Features, map_idx: np.ndarray,
-                      kp_idx: np.ndarray, weights: np.ndarray, dynamic: np.ndarray) -> None:
+                      kp_idx: np.ndarray, weights: np.ndarray, dynamic: np.ndarray):
         """``frame`` becomes a keyframe at ``T_c_w``: its matched keypoints observe their map
-        points, its new keypoints with depth (not ``dynamic``) become map points."""
+        points, its new keypoints with depth (not ``dynamic``, not screened out) become map
+        points. Returns the screening's (uv, moved) of the candidates, or None."""
+        screened = None
+        if self.config.screen_new_points and self.keyframes:
+            moved, cand = self.moved_new_points(feats, map_idx, kp_idx, T_c_w)
+            dynamic = dynamic | moved
+            screened = (feats.uv[cand], moved[cand])
         point_ids = -np.ones(len(feats), int)
         w = np.ones(len(feats))
         good = weights > 0
@@ -393,6 +450,11 @@ class FeatureTracker:
         self.frames_since_kf = 0
         if self.last_tracked == 0:
             self.last_tracked = int(new.sum())
+        if self.keeps_nearest_depth():  # the latest keyframes' nearest-depth images
+            k = len(self.keyframes) - 1
+            self.nearest[k] = nearest_depth(frame.depth, self.config.free_space_window)
+            self.nearest.pop(k - self.REFERENCE_CANDIDATES, None)
+        return screened
 
     def _local_ba(self) -> None:
         cfg = self.config

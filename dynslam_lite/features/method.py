@@ -11,7 +11,7 @@ from ..geometry import invert
 from ..imageops import dilate, union
 from ..masks import NoMasks
 from ..timing import StageTimer
-from ..tracking import Method, Tracked
+from ..tracking import Labels, Method, Tracked
 from .frontend import FeatureTracker, FrontendConfig, TrackedFrame
 
 
@@ -52,6 +52,16 @@ class FrontendMethod(Method):
     def tracked(self, frame, tf: TrackedFrame, record) -> Tracked:
         """What the runner gets for ``frame``; the detail is the frontend's :class:`TrackedFrame`."""
         return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe, detail=tf)
+
+    @staticmethod
+    def screened_labels(frame, tf: TrackedFrame, labels: Labels | None) -> Labels | None:
+        """``labels`` with a new keyframe's keypoints the frontend's screening kept out of the
+        map ('new', scored on their own positions)."""
+        if tf.screened is None:
+            return labels
+        labels = labels or Labels(frame.index)
+        labels.point_uv["new"], labels.points["new"] = tf.screened
+        return labels
 
     def track(self, ref, cur, T_init, timer) -> Tracked:
         if self.tracker.T_last is None:

@@ -50,7 +50,8 @@ translation/rotation ambiguity of a small baseline, and the near board (1.5-2 m)
 direction: the estimated pose absorbs the board's motion between the two frames, and no test
 against it (eq. 4 or the along-line variant) can see it. Thresholds on the reprojection error
 against the references give recall 0.72 at precision 0.56 with the true poses, 0.14 at 0.20 with
-the estimated ones. Hence :func:`free_space_test` (ours): references that never observed the
+the estimated ones. Hence the free-space test (ours,
+:func:`dynslam_lite.features.freespace.free_space_test`): references that never observed the
 point, older keyframes with a longer baseline, test it by their depth images.
 
 References: paper B (weightedstatic), sec. 3.2, eq. 4; paper C eq. 3 for the plain epipolar
@@ -60,11 +61,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from .. import checks
-from ..geometry import PinholeCamera, backproject, project, transform_points
+from ..geometry import PinholeCamera, backproject
 
 
 @dataclass
@@ -80,10 +80,8 @@ class GeometricConfig:
     along_line : off-line term = angle to the predicted point p' (variant), False = distance to
         the epipolar line (eq. 4, the default)
     free_space : a reference keyframe that has no observation of the point tests it by its depth
-        image (:func:`free_space_test`; ours, False = such a reference gives no verdict)
-    free_space_window : side of the window whose nearest depth the free-space test compares (px)
-    screen_new_points : a keyframe's new keypoint becomes a map point only if the free-space test
-        against the references passes (ours, with ``free_space``)
+        image (:func:`~dynslam_lite.features.freespace.free_space_test`, window
+        ``frontend.free_space_window``; ours, False = such a reference gives no verdict)
     """
 
     sigma1: float = 0.005
@@ -92,8 +90,6 @@ class GeometricConfig:
     min_baseline_m: float = 0.01
     along_line: bool = False
     free_space: bool = True
-    free_space_window: int = 5
-    screen_new_points: bool = True
 
 
 def rays(camera: PinholeCamera, uv: np.ndarray) -> np.ndarray:
@@ -164,42 +160,3 @@ def weighted_geometric_test(camera: PinholeCamera, R: np.ndarray, t: np.ndarray,
     alpha = np.where(off_line, cfg.sigma2 / cfg.sigma1, 0.0)
     delta = alpha * off + np.nan_to_num(dz)
     return GeometricTest(cos, angle, dz, delta, delta >= cfg.sigma2, off_line)
-
-
-def nearest_depth(depth: np.ndarray, window: int) -> np.ndarray:
-    """(H, W) float32: the nearest valid depth within ``window`` x ``window`` of each pixel
-    (inf where none): what :func:`free_space_test` reads in a reference keyframe."""
-    d = np.where(depth > 0, depth, np.inf).astype(np.float32)
-    return cv2.erode(d, np.ones((window, window), np.uint8), borderType=cv2.BORDER_REPLICATE)
-
-
-def free_space_test(camera: PinholeCamera, T_ref_cur: np.ndarray, uv_cur: np.ndarray, z_cur: np.ndarray,
-                    ref_nearest: np.ndarray) -> np.ndarray:
-    """Free-space score of current keypoints against a reference keyframe's depth image (ours).
-
-    The keypoint's 3-D point is moved into the reference camera (depth ``z_r`` there). If the
-    reference's nearest depth around that pixel (``ref_nearest``, :func:`nearest_depth`) lies
-    beyond it, the reference camera saw through the place where the point is now: the point was
-    not there, it moved. Score ``max(0, z_near - z_r) / z_r`` (the relative form of eq. 4's depth
-    term; dynamic at ``sigma2``). A reference seeing something nearer (an occluder, a person)
-    scores 0: it cannot tell. The window minimum keeps static points on depth edges, whose
-    reprojection may land a pixel or two on the background, from scoring. nan: no depth at the
-    keypoint, behind or outside the reference camera, or no depth in the window.
-
-    This is paper B's depth comparison ``|z - z'|`` with ``z'`` read from the reference's depth
-    image where the reference has no keypoint of the point: a point on a carried board exists in
-    the map for a frame or two, so the keyframes that could expose its motion never observed it.
-    """
-    H, W = ref_nearest.shape
-    score = np.full(len(uv_cur), np.nan)
-    ok = np.flatnonzero(z_cur > 0)
-    X = transform_points(T_ref_cur, backproject(camera, uv_cur[ok, 0], uv_cur[ok, 1], z_cur[ok]))
-    u, v = project(camera, X)
-    z_r = X[:, 2]
-    front = z_r > 0.05
-    ui, vi = np.rint(u[front]).astype(np.int64), np.rint(v[front]).astype(np.int64)
-    inside = (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
-    ok, z_r, ui, vi = ok[front][inside], z_r[front][inside], ui[inside], vi[inside]
-    near = ref_nearest[vi, ui]
-    score[ok] = np.where(np.isfinite(near), np.maximum(near - z_r, 0.0) / z_r, np.nan)
-    return score

@@ -21,10 +21,11 @@ Per frame, in the frontend's pose step (:meth:`WeightedStaticTracker.estimate`):
 5. joint LM over pose and weights (:mod:`.weighted_ba`). Matches with a final weight below
    ``min_weight`` or a chi2 beyond the gate are outliers; points judged dynamic never become
    map points, and keyframe observations keep their weights for the local bundle adjustment;
-6. (ours, ``geometric.screen_new_points``) a new keyframe's keypoints become map points only if
-   the free-space test against the references passes: a point on a carried board or a pushed
-   box would otherwise be matched in the next frames, before any reference could test it
-   (measured: walking_carry ATE 0.0073 -> 0.0056 m, walking_push 0.0272 -> 0.0157 m).
+6. (ours, the frontend's ``screen_new_points``, on by default here) a new keyframe's keypoints
+   become map points only if the free-space test against the references passes: a point on a
+   carried board or a pushed box would otherwise be matched in the next frames, before any
+   reference could test it (measured: walking_carry ATE 0.0073 -> 0.0056 m, walking_push
+   0.0272 -> 0.0157 m).
 """
 from __future__ import annotations
 
@@ -32,12 +33,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..features.freespace import free_space_test
 from ..features.frontend import Estimate, FeatureTracker, FrontendConfig
 from ..features.method import FrontendMethod
 from ..features.optimize import CHI2_STEREO, optimize_pose
 from ..geometry import invert
 from ..tracking import Labels, Tracked
-from .geometric import GeometricConfig, free_space_test, nearest_depth, weighted_geometric_test
+from .geometric import GeometricConfig, weighted_geometric_test
 from .weighted_ba import initial_weights, joint_pose_and_weights
 
 
@@ -52,7 +54,8 @@ class WeightedStaticConfig:
         (ours; False = ORB-SLAM2's pose-only optimisation over all matches, the paper's), and
         ``mask_dilate_px`` 10: keypoints within 10 px of a semantic mask dropped too (ours, the
         dilation paper C gives its removed instances: a corner on a person's outline moves with
-        the person, and a network's outline is a few pixels off; 0 = the masks as given)
+        the person, and a network's outline is a few pixels off; 0 = the masks as given), and
+        ``screen_new_points`` on (step 6)
     geometric : the weighted geometric test (sigma1, sigma2), see :class:`GeometricConfig`
     eta, omega : contributions of the semantic and geometric masks to the initial weight
         (eq. 6; 0.5 and 0.5 in the paper)
@@ -65,7 +68,8 @@ class WeightedStaticConfig:
     cull_dynamic : points judged dynamic are removed from the map
     """
 
-    frontend: FrontendConfig = field(default_factory=lambda: FrontendConfig(consistent_pose=True, mask_dilate_px=10))
+    frontend: FrontendConfig = field(default_factory=lambda: FrontendConfig(
+        consistent_pose=True, mask_dilate_px=10, screen_new_points=True))
     geometric: GeometricConfig = field(default_factory=GeometricConfig)
     eta: float = 0.5
     omega: float = 0.5
@@ -80,52 +84,12 @@ class WeightedStaticConfig:
 class WeightedStaticTracker(FeatureTracker):
     """The frontend with paper B's pose step."""
 
-    REFERENCE_CANDIDATES = 20  # references are chosen among this many latest keyframes
-
     def __init__(self, camera, config: WeightedStaticConfig):
         self.paper = config
-        self.nearest: dict[int, np.ndarray] = {}  # keyframe index -> nearest-depth image
-        self.screened: tuple[np.ndarray, np.ndarray] | None = None  # the last keyframe's candidates, verdicts
         super().__init__(camera, config.frontend)
 
-    def reference_keyframes(self, map_idx: np.ndarray, candidates: int = REFERENCE_CANDIDATES) -> list[int]:
-        """Indices of the keyframes (among the latest ``candidates``) sharing most of the points."""
-        first = max(0, len(self.keyframes) - candidates)
-        shared = [np.isin(kf.point_ids, map_idx).sum() for kf in self.keyframes[first:]]
-        order = np.argsort(-np.asarray(shared), kind="stable")[: self.paper.geometric.reference_keyframes]
-        return [first + int(i) for i in order if shared[i] > 0]
-
-    def _add_keyframe(self, frame, T_c_w, feats, map_idx, kp_idx, weights, dynamic) -> None:
-        cfg = self.paper.geometric
-        if cfg.free_space and cfg.screen_new_points and self.keyframes:
-            moved, cand = self.moved_new_points(feats, map_idx, kp_idx, T_c_w)
-            dynamic = dynamic | moved
-            self.screened = (feats.uv[cand], moved[cand])  # for the runner's scores
-        super()._add_keyframe(frame, T_c_w, feats, map_idx, kp_idx, weights, dynamic)
-        if cfg.free_space:  # the latest keyframes' nearest-depth images
-            k = len(self.keyframes) - 1
-            self.nearest[k] = nearest_depth(frame.depth, cfg.free_space_window)
-            self.nearest.pop(k - self.REFERENCE_CANDIDATES, None)
-
-    def moved_new_points(self, feats, map_idx: np.ndarray, kp_idx: np.ndarray,
-                         T_c_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """A new keyframe's keypoints that must not become map points, (N,) bool over ``feats``,
-        and the candidates tested (indices): unmatched keypoints with depth whose median
-        free-space score over the references reaches sigma2. Ours: a keypoint on a moving object
-        would become a map point that the next frames match before any reference could test it."""
-        cfg = self.paper.geometric
-        new = np.ones(len(feats), bool)
-        new[kp_idx] = False
-        cand = np.flatnonzero(new & (feats.z > 0))
-        refs = [k for k in self.reference_keyframes(map_idx) if k in self.nearest]
-        out = np.zeros(len(feats), bool)
-        if not refs or not cand.size:
-            return out, cand[:0]
-        score = np.stack([free_space_test(self.camera, self.keyframes[k].T_c_w @ invert(T_c_w), feats.uv[cand],
-                                          feats.z[cand], self.nearest[k]) for k in refs], axis=1)
-        seen = np.isfinite(score).any(axis=1)
-        out[cand[seen]] = np.nanmedian(score[seen], axis=1) >= cfg.sigma2
-        return out, cand
+    def keeps_nearest_depth(self) -> bool:
+        return super().keeps_nearest_depth() or self.paper.geometric.free_space
 
     def geometric_scores(self, feats, map_idx: np.ndarray, kp_idx: np.ndarray,
                          T_c_w: np.ndarray) -> np.ndarray:
@@ -134,7 +98,7 @@ class WeightedStaticTracker(FeatureTracker):
         A reference observing the match's map point scores it by eq. 4; one that does not, by
         the free-space test against its depth image (``geometric.free_space``, ours)."""
         cfg = self.paper.geometric
-        refs = self.reference_keyframes(map_idx)
+        refs = self.reference_keyframes(map_idx, cfg.reference_keyframes)
         delta = np.full((len(map_idx), max(len(refs), 1)), np.nan)
         for r, k in enumerate(refs):
             kf = self.keyframes[k]
@@ -194,7 +158,7 @@ class WeightedStaticTracker(FeatureTracker):
 class WeightedStaticMethod(FrontendMethod):
     """Method ``weightedstatic``. Each frame's labels are its matched keypoints judged dynamic by
     the geometric test ('geometric') and by the final weights ('weights': phi < phi0 / 2), and a
-    keyframe's new keypoints kept out of the map by the free-space test ('new')."""
+    keyframe's new keypoints kept out of the map by the frontend's screening ('new')."""
 
     name = "weightedstatic"
     config_type = WeightedStaticConfig
@@ -208,9 +172,5 @@ class WeightedStaticMethod(FrontendMethod):
             if "phi" in est.info:
                 points["weights"] = est.info["phi"] < 0.5 * est.info["phi0"]
             out.labels = Labels(frame.index, uv=tf.feats.uv[tf.kp_idx], points=points)
-        screened, self.tracker.screened = self.tracker.screened, None
-        if tf.keyframe and screened is not None:  # the new keyframe's screened keypoints
-            out.labels = out.labels or Labels(frame.index)
-            out.labels.points["new"] = screened[1]
-            out.labels.point_uv["new"] = screened[0]
+        out.labels = self.screened_labels(frame, tf, out.labels)
         return out
