@@ -109,12 +109,15 @@ def cmd_bench(a) -> int:
         seq = open_sequence(path.path)
     print(f"{'method':18s} {'stage':10s} {'mean ms':>9s} {'median ms':>10s} {'frames':>7s}")
     methods = list(dict.fromkeys(a.methods))
+    masks_of = {}  # each method's mask source, as the tables run it (--masks replaces a semantic one)
+    for method in methods:
+        run = next(r for r in experiments.MAIN if r.method == method)
+        spec = run.mask_source("real" if a.seq else "synthetic")
+        masks_of[method] = a.masks if a.masks and spec != "none" else spec
     without_masks: dict[str, list[float]] = {m: [] for m in methods}  # ms/frame of each round
     for k in range(a.repeat):
         for method in methods[k % len(methods):] + methods[:k % len(methods)]:
-            run = next(r for r in experiments.MAIN if r.method == method)  # as the tables run it
-            masks = run.mask_source("real" if a.seq else "synthetic")
-            masks = a.masks if a.masks and masks != "none" else masks
+            masks = masks_of[method]
             r = run_method(method, seq, masks=masks)
             without_masks[method].append(
                 (np.sum(r.frame_ms) - np.sum(r.stage_ms.get("masks", []))) / len(r.frame_ms))

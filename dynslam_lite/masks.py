@@ -7,7 +7,10 @@ a source is chosen by a spec string (``--masks`` on the command line, ``masks`` 
 * ``oracle`` — the synthetic ground truth of the person class (what a person detector gives,
   the papers' dynamic class), moving or standing still, split into instances (connected
   components); ``oracle:degraded`` imitates a real network: dilated or eroded outlines, dropped
-  frames, false blobs (deterministic per seed and frame); ``oracle:all`` — every object instance
+  frames, false blobs (deterministic per seed and frame); ``oracle:missed`` the ground truth
+  except that every person covering more than 5 % of the image is missed in 12 frames of every 36
+  (frames 24-35, 60-71, ...: a detector losing the people close to the camera, cut by the image
+  border or blurred, for a while); ``oracle:all`` — every object instance
   of the synthetic ground truth, people, carried and pushed objects and furniture alike (what an
   instance segmenter such as paper C's Mask R-CNN gives); ``oracle:moving`` — the ground truth
   of every object that moves in the frame, whatever its class (no method can know this: the run
@@ -44,21 +47,38 @@ class NoMasks:
 
 @dataclass
 class Degradation:
-    """How ``oracle:degraded`` spoils the ground truth, per instance and frame."""
+    """How ``oracle:degraded`` (and ``oracle:missed``) spoil the ground truth, per instance and frame.
+
+    Attributes
+    ----------
+    max_dilate_px, max_erode_px : each instance dilated or eroded by a random radius up to these
+    drop_rate : probability that an instance is missed in a frame
+    false_blob_rate : probability of a false elliptic blob in a frame
+    seed : of the random draws (with the frame index)
+    near_fraction, near_miss_frames, near_miss_period : instances covering more than
+        ``near_fraction`` of the image are missed in the last ``near_miss_frames`` frames of every
+        ``near_miss_period`` (0 frames: never)
+    """
 
     max_dilate_px: int = 6
     max_erode_px: int = 4
     drop_rate: float = 0.1
     false_blob_rate: float = 0.1
     seed: int = 0
+    near_fraction: float = 0.05
+    near_miss_frames: int = 0
+    near_miss_period: int = 36
+
+
+MISSED = Degradation(0, 0, 0.0, 0.0, near_miss_frames=12)  # oracle:missed
 
 
 class OracleMasks:
     """Ground-truth person masks of a synthetic sequence, optionally degraded."""
 
-    def __init__(self, degradation: Degradation | None = None):
+    def __init__(self, degradation: Degradation | None = None, name: str | None = None):
         self.degradation = degradation
-        self.name = "oracle:degraded" if degradation else "oracle"
+        self.name = name or ("oracle:degraded" if degradation else "oracle")
 
     def __call__(self, frame: Frame) -> list[np.ndarray]:
         if frame.mask is None:
@@ -73,6 +93,8 @@ class OracleMasks:
         if d is None:
             return inst
         rng = np.random.default_rng([d.seed, frame.index])
+        if d.near_miss_frames and frame.index % d.near_miss_period >= d.near_miss_period - d.near_miss_frames:
+            inst = [m for m in inst if m.mean() <= d.near_fraction]
         out = []
         for m in inst:
             if rng.random() < d.drop_rate:
@@ -167,7 +189,8 @@ class FileMasks:
         return [img == i for i in ids]
 
 
-SOURCES = "none, oracle, oracle:degraded, oracle:all, oracle:moving, files:DIR, person, person:landscape or onnx:PATH"
+SOURCES = ("none, oracle, oracle:degraded, oracle:missed, oracle:all, oracle:moving, files:DIR, person, "
+           "person:landscape or onnx:PATH")
 
 
 def make_mask_source(spec: str):
@@ -177,6 +200,8 @@ def make_mask_source(spec: str):
         return NoMasks()
     if kind == "oracle" and arg in ("", "degraded"):
         return OracleMasks(Degradation() if arg else None)
+    if kind == "oracle" and arg == "missed":
+        return OracleMasks(MISSED, "oracle:missed")
     if kind == "oracle" and arg == "all":
         return AllObjectMasks()
     if kind == "oracle" and arg == "moving":

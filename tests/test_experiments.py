@@ -35,7 +35,7 @@ def test_runs_per_sequence_follow_the_run_sets():
         "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic", E.OPENCV_FAST.label]
     assert E.OPENCV_FAST not in E.runs_for("synthetic", "sitting_xyz")
     xyz = E.runs_for("synthetic", "walking_xyz")
-    assert len(xyz) == 20 and xyz[-1] is E.BG_ALL_VIEWS and E.BGRESTORE in xyz
+    assert len(xyz) == 21 and xyz[-1] is E.BG_ALL_VIEWS and E.BGRESTORE in xyz
     carry = E.runs_for("synthetic", "walking_carry")
     assert carry == [E.STATIC_DENSE, E.OPENCV_ODOMETRY, E.DEPTHCLUSTER, *E.OBJECT_ROWS]
     assert E.DC_PAPER not in carry and E.DC_PAPER in E.runs_for("synthetic", "crowd")

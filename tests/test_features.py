@@ -182,3 +182,41 @@ def test_semantic_masks_are_dilated_before_keypoints_are_dropped():
     _, wide, _, _ = WeightedStaticMethod(cam, WeightedStaticConfig()).prepare(frame, [person], None)
     assert np.array_equal(plain, person)
     assert wide[person].all() and wide[95, 320] and wide[150, 349] and not wide[89, 320] and not wide[150, 351]
+
+
+def test_a_start_pose_already_refined_takes_one_narrow_search_and_one_pose_step(scene):
+    """bgrestore tracks its restored frame from the trial pose it found on the same frame: the
+    frontend then searches once, in the narrow window, and runs one pose step."""
+    seq = open_sequence(scene("static_xyz", 150))
+    gt = [seq.groundtruth.nearest(t) for t in seq.timestamps[:8]]
+    trackers = [FeatureTracker(CAM), FeatureTracker(CAM)]
+    for i in range(7):
+        for tr in trackers:
+            tr.process(seq[i])
+    calls = []
+    for tr in trackers:
+        step = tr.estimate
+        tr.estimate = lambda *a, step=step: calls.append(1) or step(*a)
+    truth = invert(gt[7]) @ gt[0]  # world = the first camera
+    plain = trackers[0].process(seq[7])
+    n_plain = len(calls)
+    refined = trackers[1].process(seq[7], T_init=truth, refined=True)
+    assert plain.ok and refined.ok and n_plain == 2 and len(calls) - n_plain == 1
+    for tr in trackers:
+        err = tr.T_last @ invert(truth)
+        assert np.linalg.norm(err[:3, 3]) < 0.005, err
+
+
+def test_the_screening_keeps_a_person_the_masks_miss_out_of_the_map(scene):
+    """crowd with ``oracle:missed``: the near person is unmasked in frames 24-35. With masks alone
+    its keypoints become map points at the next keyframe and are tracked from then on; the
+    frontend's free-space screening keeps them out (measured on 45 frames: ATE 0.100 m without,
+    0.022 m with; screened keypoints precision 1.00, recall 0.87)."""
+    seq = open_sequence(scene("crowd", 45))
+    off = run_method("static-orb", seq, masks="oracle:missed")
+    on = run_method("static-orb", seq, {"screen_new_points": True}, masks="oracle:missed")
+    e_off, e_on = (evaluate(seq.groundtruth, r.trajectory).ate.rmse for r in (off, on))
+    assert e_on < 0.04 and e_off > 3 * e_on, (e_off, e_on)
+    new = on.scores["points/new"]
+    assert new.precision > 0.9 and new.recall > 0.7 and new.tp > 500, new
+    assert "points/new" not in off.scores

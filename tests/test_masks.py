@@ -67,3 +67,15 @@ def test_split_instances_drops_specks():
     m = _two_people()
     m[0, 159] = True
     assert len(split_instances(m)) == 2
+
+
+def test_missed_oracle_loses_the_near_people_in_12_of_every_36_frames():
+    """``oracle:missed``: an instance covering more than 5 % of the image is missed in frames
+    24-35, 60-71, ...; a small (far) one never."""
+    m = np.zeros((120, 160), bool)
+    m[:, :40] = True  # 25 % of the image: near
+    m[10:20, 100:110] = True  # 0.5 %: far
+    src = make_mask_source("oracle:missed")
+    for index, near in ((0, True), (23, True), (24, False), (35, False), (36, True), (60, False), (72, True)):
+        inst = src(_frame(m, index))
+        assert len(inst) == 1 + near and inst[-1].sum() == 100, index

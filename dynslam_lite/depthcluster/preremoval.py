@@ -165,24 +165,24 @@ def _remove_regions(labels, block, dynamic, moving, cfg: PreRemovalConfig) -> np
     limit = cfg.max_region_fraction * H * W
     near_dyn = cv2.dilate(dynamic.reshape(cfg.rows, cfg.cols).astype(np.uint8), np.ones((3, 3), np.uint8))
     near_dyn_px = near_dyn.reshape(-1).astype(bool)[block]
+    px = np.flatnonzero(dynamic[block])  # the pixels of the dynamic blocks
+    px_block = block.ravel()[px]
+    px_layer = moving[px_block]
     for layer in np.unique(moving[dynamic]):
         n_cc, cc = cv2.connectedComponents((labels == layer).astype(np.uint8), connectivity=8)
         area = np.bincount(cc.ravel(), minlength=n_cc)
-        blocks = np.flatnonzero(dynamic & (moving == layer))
-        # per dynamic block, the largest component of this layer inside it
-        in_blocks = np.zeros(dynamic.size, bool)
-        in_blocks[blocks] = True
-        sel = in_blocks[block] & (cc > 0)
-        keys = block[sel] * n_cc + cc[sel]
+        # per dynamic block of this layer, the largest component of the layer inside it
+        own = px[px_layer == layer]
+        comp = cc.ravel()[own]
+        keys = block.ravel()[own][comp > 0] * n_cc + comp[comp > 0]
         uniq = np.flatnonzero(np.bincount(keys))  # the (block, component) pairs present, sorted
         b_of, c_of = np.divmod(uniq, n_cc)
-        best = {}
-        for b, c in zip(b_of, c_of):
-            if b not in best or area[c] > area[best[b]]:
-                best[b] = c
-        for c in set(best.values()):
-            region = cc == c
-            if area[c] > limit:
-                region &= near_dyn_px
-            mask |= region
+        order = np.lexsort((c_of, -area[c_of], b_of))  # per block: largest first, then lowest id
+        first = np.ones(order.size, bool)
+        first[1:] = b_of[order][1:] != b_of[order][:-1]
+        kind = np.zeros(n_cc, np.uint8)  # 1: a chosen region, 2: one cut to the dynamic blocks' area
+        chosen = c_of[order][first]
+        kind[chosen] = np.where(area[chosen] > limit, 2, 1)
+        taken = kind[cc]
+        mask |= (taken == 1) | ((taken == 2) & near_dyn_px)
     return mask

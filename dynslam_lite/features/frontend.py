@@ -210,11 +210,12 @@ class FeatureTracker:
 
     # ------------------------------------------------------------------ per frame
     def process(self, frame, exclude: np.ndarray | None = None, timer=None,
-                T_init: np.ndarray | None = None) -> TrackedFrame:
+                T_init: np.ndarray | None = None, refined: bool = False) -> TrackedFrame:
         """Track one frame (a :class:`dynslam_lite.io.Frame`); failures are reported, not raised.
 
         ``exclude``: (H, W) bool, keypoints inside are dropped (semantic masks).
-        ``T_init``: world-to-camera start of the search (default: the constant-velocity prediction).
+        ``T_init``: world-to-camera start of the search (default: the constant-velocity prediction);
+        ``refined``: it is already this frame's pose (a trial pose), see :meth:`locate`.
         """
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("orb"):
@@ -226,7 +227,7 @@ class FeatureTracker:
             return TrackedFrame(frame.index, feats, np.zeros(0, int), np.zeros(0, int), None, True,
                                 keyframe=True)
         T_pred = self.predict() if T_init is None else T_init
-        mi, ki, est, T_pred, reason = self.locate(frame, feats, T_pred, timer)
+        mi, ki, est, T_pred, reason = self.locate(frame, feats, T_pred, timer, refined=refined)
         if est is None or reason:
             self._record(T_pred)
             return TrackedFrame(frame.index, feats, mi, ki, est, False, reason)
@@ -249,10 +250,13 @@ class FeatureTracker:
         self._record(T)
         return TrackedFrame(frame.index, feats, mi, ki, est, True, keyframe=is_kf, screened=screened)
 
-    def locate(self, frame, feats: Features, T_init: np.ndarray, timer=None, count: bool = True):
+    def locate(self, frame, feats: Features, T_init: np.ndarray, timer=None, count: bool = True,
+               refined: bool = False):
         """Pose of ``feats`` against the local map: search by projection from ``T_init``, pose,
         search again in a narrow window, pose. Changes no map or keyframe; ``count`` = False
-        also leaves the points' visibility counts alone (a trial pose).
+        also leaves the points' visibility counts alone (a trial pose). ``refined``: ``T_init``
+        is already this frame's pose (a trial pose), so one search in the narrow window and one
+        pose step are enough (widened as the first search is when it finds too few matches).
 
         Returns (map indices, keypoint indices, Estimate or None, the start pose used, failure
         reason or '').
@@ -260,15 +264,17 @@ class FeatureTracker:
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("match"):
             local = self._local_points()
-            mi, ki, T_init = self._search(local, feats, T_init, self.config.search_radius_px, True, count)
+            radius = self.config.refine_radius_px if refined else self.config.search_radius_px
+            mi, ki, T_init = self._search(local, feats, T_init, radius, True, count)
         if len(mi) < self.config.min_inliers:
             return mi, ki, None, T_init, f"{len(mi)} matches to the local map (need {self.config.min_inliers})"
         with stage("pose"):
             est = self.estimate(frame, feats, mi, ki, T_init)
-        with stage("match"):
-            mi, ki, _ = self._search(local, feats, est.T_c_w, self.config.refine_radius_px, False)
-        with stage("pose"):
-            est = self.estimate(frame, feats, mi, ki, est.T_c_w)
+        if not refined:
+            with stage("match"):
+                mi, ki, _ = self._search(local, feats, est.T_c_w, self.config.refine_radius_px, False)
+            with stage("pose"):
+                est = self.estimate(frame, feats, mi, ki, est.T_c_w)
         n_in = int(est.inliers.sum())
         if n_in < self.config.min_inliers:
             return mi, ki, est, T_init, f"{n_in} inlier matches (need {self.config.min_inliers})"

@@ -39,19 +39,22 @@ class FrontendMethod(Method):
         with timer.stage("masks"):
             instances = self.masks(frame)
         seen, exclude, T_init, record = self.prepare(frame, instances, timer)
-        tf = self.tracker.process(seen, exclude, timer, T_init)
+        tf = self.tracker.process(seen, exclude, timer, T_init, refined=T_init is not None)
         self.n_frames += 1
         return self.tracked(frame, tf, record)
 
     def prepare(self, frame, instances: list[np.ndarray], timer: StageTimer):
-        """(frame the frontend tracks, (H, W) bool keypoint exclusion or None, start pose or None,
-        record for :meth:`tracked`): here the frame as it is, without keypoints in the (dilated) masks."""
+        """(frame the frontend tracks, (H, W) bool keypoint exclusion or None, this frame's pose
+        from a trial or None (the frontend then searches once, in the narrow window; None: from
+        its prediction), record for :meth:`tracked`): here the frame as it is, without keypoints
+        in the (dilated) masks."""
         people = union(instances)
         return frame, None if people is None else dilate(people, self.tracker.config.mask_dilate_px), None, None
 
     def tracked(self, frame, tf: TrackedFrame, record) -> Tracked:
-        """What the runner gets for ``frame``; the detail is the frontend's :class:`TrackedFrame`."""
-        return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe, detail=tf)
+        """What the runner gets for ``frame``; the detail is the frontend's :class:`TrackedFrame`,
+        the labels a new keyframe's keypoints the screening kept out of the map."""
+        return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe, self.screened_labels(frame, tf, None), tf)
 
     @staticmethod
     def screened_labels(frame, tf: TrackedFrame, labels: Labels | None) -> Labels | None:
