@@ -69,8 +69,23 @@ class Degradation:
     near_miss_frames: int = 0
     near_miss_period: int = 36
 
+    def misses_near(self, index: int) -> bool:
+        """Whether frame ``index`` loses the instances covering more than ``near_fraction``."""
+        return bool(self.near_miss_frames) and index % self.near_miss_period >= self.near_miss_period - self.near_miss_frames
 
-MISSED = Degradation(0, 0, 0.0, 0.0, near_miss_frames=12)  # oracle:missed
+    def near_miss_ranges(self, n_frames: int) -> list[tuple[int, int]]:
+        """(first, last) frame of every run of frames in ``range(n_frames)`` that misses the near instances."""
+        runs: list[list[int]] = []
+        for i in filter(self.misses_near, range(n_frames)):
+            if runs and runs[-1][1] == i - 1:
+                runs[-1][1] = i
+            else:
+                runs.append([i, i])
+        return [(a, b) for a, b in runs]
+
+
+MISSED = Degradation(max_dilate_px=0, max_erode_px=0, drop_rate=0.0, false_blob_rate=0.0,
+                     near_miss_frames=12)  # oracle:missed
 
 
 class OracleMasks:
@@ -93,7 +108,7 @@ class OracleMasks:
         if d is None:
             return inst
         rng = np.random.default_rng([d.seed, frame.index])
-        if d.near_miss_frames and frame.index % d.near_miss_period >= d.near_miss_period - d.near_miss_frames:
+        if d.misses_near(frame.index):
             inst = [m for m in inst if m.mean() <= d.near_fraction]
         out = []
         for m in inst:

@@ -10,6 +10,7 @@ from __future__ import annotations
 from . import experiments as E
 from . import published as P
 from .evaluation import ErrorStats
+from .masks import MISSED
 from .experiments import RunRecord
 from .reports import fmt
 
@@ -74,6 +75,12 @@ def _real_head(idx, seq: str, methods) -> list:
 def _frames(idx, seq: str, methods) -> str:
     n = {idx[(seq, m)].frames for m in methods if (seq, m) in idx}
     return "/".join(str(x) for x in sorted(n)) or "-"
+
+
+def _ranges(runs: list[tuple[int, int]]) -> str:
+    """'24-35, 60-71 and 96-107' from [(24, 35), (60, 71), (96, 107)]."""
+    text = [f"{a}-{b}" for a, b in runs] or ["none"]
+    return " and ".join([", ".join(text[:-1]), text[-1]]) if len(text) > 1 else text[0]
 
 
 def _get(idx, seq, method, metric, stat):
@@ -524,11 +531,13 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
         p = _defined_pr(c)
         return f"{fmt(p[0], 2)} / {fmt(p[1], 2)}" if p else f"- (no moving match; {c.fp} false alarms)"
 
-    rows = []
+    rows, missed_frames = [], 0
     for seq in _ours(results):
         for run in E.OBJECT_ROWS + E.MISSED_ROWS:
             r = idx.get((seq, run.label))
             if r:
+                if run in E.MISSED_ROWS:
+                    missed_frames = max(missed_frames, r.frames)
                 rows.append([seq, run.description, run.label, r.errors.ate.rmse, r.failed_frames,
                              pr(r, "points/moved" if run.method == "bgrestore" else "points/geometric"),
                              pr(r, "points/new"), pr(r, "pixels/removed")])
@@ -539,9 +548,9 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
              "(three people, one passing close to the camera; people cover up to half the "
              "image). 'oracle' masks are the person class only (what a person detector gives); "
              "'oracle:all' every object instance with its class (paper C's Mask R-CNN); "
-             "'oracle:missed' (crowd) the person masks with every person covering more than 5 % of the "
-             "image missed in frames 24-35, 60-71, 96-107 and 132-143 (a detector losing the people "
-             "close to the camera). Truth for "
+             f"'oracle:missed' (crowd) the person masks with every person covering more than "
+             f"{MISSED.near_fraction * 100:g} % of the image missed in frames {_ranges(MISSED.near_miss_ranges(missed_frames))} "
+             "(a detector losing the people close to the camera). Truth for "
              "P / R: the ground-truth mask of every moving object (people, board, boxes). "
              "'dynamic points': matched keypoints outside the masks judged dynamic by the "
              "geometric test (weightedstatic) or by their epipolar distance (bgrestore, ours: not "

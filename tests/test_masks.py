@@ -6,7 +6,7 @@ import pytest
 from dynslam_lite.evaluation import MaskScores
 from dynslam_lite.io import Frame, SequenceError, open_sequence
 from dynslam_lite.imageops import split_instances
-from dynslam_lite.masks import FileMasks, make_mask_source
+from dynslam_lite.masks import MISSED, FileMasks, make_mask_source
 
 
 def _frame(mask, index=0, t=100.0):
@@ -79,3 +79,6 @@ def test_missed_oracle_loses_the_near_people_in_12_of_every_36_frames():
     for index, near in ((0, True), (23, True), (24, False), (35, False), (36, True), (60, False), (72, True)):
         inst = src(_frame(m, index))
         assert len(inst) == 1 + near and inst[-1].sum() == 100, index
+    # the ranges the objects table prints
+    assert MISSED.near_miss_ranges(150) == [(24, 35), (60, 71), (96, 107), (132, 143)]
+    assert MISSED.near_miss_ranges(30) == [(24, 29)] and MISSED.near_miss_ranges(24) == []

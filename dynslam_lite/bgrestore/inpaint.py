@@ -138,7 +138,8 @@ def _candidates(camera, kf, T_cur_kf, reach: np.ndarray, coarse: int = 4) -> np.
     blocks = np.zeros((-(-H // coarse), -(-W // coarse)), np.uint8)
     blocks[v // coarse, u // coarse] = 1
     blocks = cv2.dilate(blocks, np.ones((3, 3), np.uint8))
-    return np.repeat(np.repeat(blocks, coarse, 0), coarse, 1)[:H, :W].astype(bool)
+    size = (blocks.shape[1] * coarse, blocks.shape[0] * coarse)  # each block back to its pixels
+    return cv2.resize(blocks, size, interpolation=cv2.INTER_NEAREST)[:H, :W].view(bool)
 
 
 def splat(x: np.ndarray, y: np.ndarray, values: np.ndarray, hole: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

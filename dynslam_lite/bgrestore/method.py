@@ -127,15 +127,15 @@ class BgRestoreMethod(FrontendMethod):
         restored = np.zeros_like(hole)
         grown = np.zeros_like(hole)
         rgb, depth = frame.rgb, frame.depth
-        T_init = None
+        T_trial = None
         if cfg.restore and hole.any() and self.tracker.keyframes:
             # a trial pose from the keypoints outside the hole places the keyframes' pixels
             static = feats.subset(~sample_nearest(hole | moved, feats.uv))
             T_pred = self.tracker.predict()
             _, _, est, _, reason = self.tracker.locate(frame, static, T_pred, timer, count=False)
-            T_init = est.T_c_w if est is not None and not reason else None  # None: the trial failed
+            T_trial = est.T_c_w if est is not None and not reason else None  # None: the trial failed
             with timer.stage("inpaint"):
-                T_place = T_pred if T_init is None else T_init
+                T_place = T_pred if T_trial is None else T_trial
                 res = restore_from_keyframes(self.camera, rgb, depth, hole, invert(T_place),
                                              self._keyframe_images(), views=cfg.views or None)
                 rgb, depth, restored = res.rgb, res.depth, res.filled
@@ -147,7 +147,7 @@ class BgRestoreMethod(FrontendMethod):
         left = hole & ~restored  # no keyframe saw behind: no keypoints there
         depth = np.where(left & ~grown, 0.0, depth).astype(np.float32)
         record = (instances, FrameRestoration(removal, restored, grown, rgb, depth), left)
-        return replace(frame, rgb=rgb, depth=depth), left | moved, T_init, record
+        return replace(frame, rgb=rgb, depth=depth), left | moved, T_trial, record
 
     def tracked(self, frame, tf, record) -> Tracked:
         instances, rec, left = record

@@ -172,9 +172,10 @@ def _remove_regions(labels, block, dynamic, moving, cfg: PreRemovalConfig) -> np
         n_cc, cc = cv2.connectedComponents((labels == layer).astype(np.uint8), connectivity=8)
         area = np.bincount(cc.ravel(), minlength=n_cc)
         # per dynamic block of this layer, the largest component of the layer inside it
-        own = px[px_layer == layer]
-        comp = cc.ravel()[own]
-        keys = block.ravel()[own][comp > 0] * n_cc + comp[comp > 0]
+        own = px_layer == layer
+        comp = cc.ravel()[px[own]]
+        inside = comp > 0
+        keys = px_block[own][inside] * n_cc + comp[inside]
         uniq = np.flatnonzero(np.bincount(keys))  # the (block, component) pairs present, sorted
         b_of, c_of = np.divmod(uniq, n_cc)
         order = np.lexsort((c_of, -area[c_of], b_of))  # per block: largest first, then lowest id

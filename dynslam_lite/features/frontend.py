@@ -346,11 +346,21 @@ class FeatureTracker:
         out = np.zeros(len(feats), bool)
         if not refs or not cand.size:
             return out, cand[:0]
-        score = np.stack([free_space_test(self.camera, self.keyframes[k].T_c_w @ invert(T_c_w), feats.uv[cand],
-                                          feats.z[cand], self.nearest[k]) for k in refs], axis=1)
+        score = self.free_space_scores(refs, T_c_w, feats.uv[cand], feats.z[cand])
         seen = np.isfinite(score).any(axis=1)
         out[cand[seen]] = np.nanmedian(score[seen], axis=1) >= cfg.screen_threshold
         return out, cand
+
+    def free_space_scores(self, refs: list[int], T_c_w: np.ndarray, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """(N, len(refs)) free-space scores (:func:`free_space_test`) of keypoints ``uv`` with depth
+        ``z`` of the frame at ``T_c_w`` against the depth image of each keyframe in ``refs`` (nan
+        for a keyframe that keeps none)."""
+        score = np.full((len(uv), len(refs)), np.nan)
+        T_w_c = invert(T_c_w)
+        for r, k in enumerate(refs):
+            if k in self.nearest:
+                score[:, r] = free_space_test(self.camera, self.keyframes[k].T_c_w @ T_w_c, uv, z, self.nearest[k])
+        return score
 
     def keeps_nearest_depth(self) -> bool:
         """Whether keyframes keep the nearest-depth image the free-space test reads."""
@@ -430,7 +440,8 @@ class FeatureTracker:
         return T
 
     def _add_keyframe(self, frame: Frame, T_c_w: np.ndarray, feats: Features, map_idx: np.ndarray,
-                      kp_idx: np.ndarray, weights: np.ndarray, dynamic: np.ndarray):
+                      kp_idx: np.ndarray, weights: np.ndarray,
+                      dynamic: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """``frame`` becomes a keyframe at ``T_c_w``: its matched keypoints observe their map
         points, its new keypoints with depth (not ``dynamic``, not screened out) become map
         points. Returns the screening's (uv, moved) of the candidates, or None."""

@@ -38,16 +38,17 @@ class FrontendMethod(Method):
         timer = timer or StageTimer()
         with timer.stage("masks"):
             instances = self.masks(frame)
-        seen, exclude, T_init, record = self.prepare(frame, instances, timer)
-        tf = self.tracker.process(seen, exclude, timer, T_init, refined=T_init is not None)
+        seen, exclude, T_trial, record = self.prepare(frame, instances, timer)
+        tf = self.tracker.process(seen, exclude, timer, T_init=T_trial, refined=T_trial is not None)
         self.n_frames += 1
         return self.tracked(frame, tf, record)
 
     def prepare(self, frame, instances: list[np.ndarray], timer: StageTimer):
-        """(frame the frontend tracks, (H, W) bool keypoint exclusion or None, this frame's pose
-        from a trial or None (the frontend then searches once, in the narrow window; None: from
-        its prediction), record for :meth:`tracked`): here the frame as it is, without keypoints
-        in the (dilated) masks."""
+        """(frame the frontend tracks, (H, W) bool keypoint exclusion or None, ``T_trial``,
+        record for :meth:`tracked`). ``T_trial``: this frame's pose from a trial that already ran
+        the frontend's search and refinement on it (the frontend then searches once, in the narrow
+        window), or None (it tracks from its prediction). Here the frame as it is, without
+        keypoints in the (dilated) masks, and no trial."""
         people = union(instances)
         return frame, None if people is None else dilate(people, self.tracker.config.mask_dilate_px), None, None
 

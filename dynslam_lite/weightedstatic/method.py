@@ -33,7 +33,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..features.freespace import free_space_test
 from ..features.frontend import Estimate, FeatureTracker, FrontendConfig
 from ..features.method import FrontendMethod
 from ..features.optimize import CHI2_STEREO, optimize_pose
@@ -112,10 +111,9 @@ class WeightedStaticTracker(FeatureTracker):
                                            kf.feats.z[idx[has]], feats.uv[kp_idx[has]],
                                            feats.z[kp_idx[has]], cfg)
             delta[has, r] = test.delta
-            if cfg.free_space and k in self.nearest and not has.all():
+            if cfg.free_space and not has.all():
                 kp = kp_idx[~has]
-                delta[~has, r] = free_space_test(self.camera, invert(T), feats.uv[kp], feats.z[kp],
-                                                 self.nearest[k])
+                delta[~has, r] = self.free_space_scores([k], T_c_w, feats.uv[kp], feats.z[kp])[:, 0]
         out = np.full(len(map_idx), np.nan)  # nan: the point is seen in no reference
         seen = np.isfinite(delta).any(axis=1)
         out[seen] = np.nanmedian(delta[seen], axis=1)
@@ -165,12 +163,10 @@ class WeightedStaticMethod(FrontendMethod):
     tracker_type = WeightedStaticTracker
 
     def tracked(self, frame, tf, record) -> Tracked:
-        out = super().tracked(frame, tf, record)
-        est = tf.estimate
+        labels, est = None, tf.estimate
         if est is not None and len(tf.kp_idx):
             points = {"geometric": est.info["geo_dynamic"]}
             if "phi" in est.info:
                 points["weights"] = est.info["phi"] < 0.5 * est.info["phi0"]
-            out.labels = Labels(frame.index, uv=tf.feats.uv[tf.kp_idx], points=points)
-        out.labels = self.screened_labels(frame, tf, out.labels)
-        return out
+            labels = Labels(frame.index, uv=tf.feats.uv[tf.kp_idx], points=points)
+        return Tracked(np.eye(4), tf.ok, tf.reason, tf.keyframe, self.screened_labels(frame, tf, labels), tf)
