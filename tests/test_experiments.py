@@ -163,7 +163,9 @@ def test_object_scenes_are_labelled_rows_of_papers_b_and_c_and_fill_their_own_ta
 
     carry = "synthetic/walking_carry"
     recs = [_record(carry, run, 0.01 * (k + 1)) for k, run in enumerate(E.OBJECT_ROWS)]
-    recs[E.OBJECT_ROWS.index(E.WEIGHTEDSTATIC)].scores = {"points/geometric": MaskScores.from_counts(8, 2, 2)}
+    recs[E.OBJECT_ROWS.index(E.WEIGHTEDSTATIC)].scores = {"points/geometric": MaskScores.from_counts(8, 2, 2),
+                                                          "points/new": MaskScores.from_counts(10, 0, 0)}
+    recs[E.OBJECT_ROWS.index(E.WS_NO_SCREEN)].scores = {"points/geometric": MaskScores.from_counts(8, 2, 2)}
     recs.append(_record("synthetic/walking_xyz", E.STATIC_ORB, 0.5))
     for make, measured in ((tables.paper_b_table1, E.WEIGHTEDSTATIC), (tables.paper_c_table1, E.BGRESTORE)):
         header, rows, notes = make(recs)
@@ -174,7 +176,8 @@ def test_object_scenes_are_labelled_rows_of_papers_b_and_c_and_fill_their_own_ta
     header, rows, _ = tables.paper_bc_objects(recs)
     assert [r[2] for r in rows] == [run.label for run in E.OBJECT_ROWS]
     ws = rows[E.OBJECT_ROWS.index(E.WEIGHTEDSTATIC)]
-    assert ws[5] == "0.80 / 0.80" and ws[6] == "-"
+    assert ws[5:8] == ["0.80 / 0.80", "1.00 / 1.00", "0.90 / 0.90"]  # both tests' verdicts pooled
+    assert rows[E.OBJECT_ROWS.index(E.WS_NO_SCREEN)][5:8] == ["0.80 / 0.80", "-", "-"]
 
 
 def test_paper_a_ablation_has_the_paper_alone_each_addition_and_the_default_per_sequence():

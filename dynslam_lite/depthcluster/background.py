@@ -90,10 +90,10 @@ def current_samples(gray_cur: np.ndarray, depth_cur: np.ndarray) -> tuple[np.nda
 
 def _threshold(r_i: np.ndarray, static: np.ndarray, cfg: OutlierConfig) -> float:
     """tau of the photometric outlier test from the residuals of the static pixels (NaN: too few)."""
-    ok = np.isfinite(r_i) & static
-    if ok.sum() < 100:
+    ok = np.flatnonzero(np.isfinite(r_i) & static)
+    if ok.size < 100:
         return float("nan")
-    sample = r_i[ok][::cfg.mad_stride]  # an evenly strided sample estimates the spread as well
+    sample = r_i.ravel()[ok[::cfg.mad_stride]]  # an evenly strided sample estimates the spread as well
     mad = float(np.median(np.abs(sample - np.median(sample))))
     return max(cfg.tau_min, cfg.k_sigma * 1.4826 * mad)
 

@@ -180,6 +180,7 @@ def _kmeans_1d(x: np.ndarray, centres: np.ndarray, iters: int) -> np.ndarray | N
     centres stop increasing (the caller falls back to scipy)."""
     c = np.array(centres, float)
     n = len(x)
+    last: list[int] = []
     for _ in range(iters):
         if np.any(np.diff(c) <= 0):
             return None
@@ -192,6 +193,9 @@ def _kmeans_1d(x: np.ndarray, centres: np.ndarray, iters: int) -> np.ndarray | N
                 j += 1
             ends.append(max(j, ends[-1]))
         ends.append(n)
+        if ends == last:  # the same clusters give the same centres: converged
+            break
+        last = ends
         for i, (a, b) in enumerate(zip(ends[:-1], ends[1:])):
             if b > a:  # an empty cluster keeps its centre
                 c[i] = np.cumsum(x[a:b])[-1] / (b - a)
