@@ -149,8 +149,8 @@ BG_MISSED = _run("bgrestore[oracle:missed]", "bgrestore", _MISSED, "paper C, nea
 STATIC_ORB_MOVING = _run("static-orb[oracle:moving]", "static-orb", "oracle:moving",
                          "masks of every moving object from the ground truth: the bound of any moving-object handling")
 
-# real data: the same runs with the keypoint budget 1 % lower and higher, which says how far a
-# real clip's single ATE moves when nothing that should matter changes
+# the same runs with the keypoint budget 1 % lower and higher, on the real clips and our object
+# scenes, which says how far one run's ATE moves when nothing that should matter changes
 _BUDGETS = (990, 1010)
 _KP = "frontend.orb.n_features"
 SENSITIVITY_OF = {  # base run -> its runs with the budgets of _BUDGETS, in that order
@@ -205,6 +205,7 @@ RUN_SETS = (
     # our object scenes: papers B and C where people carry and push things, stand still, crowd
     RunSet("object scenes", OBJECT_ROWS, scenes=OBJECT_SCENES),
     RunSet("missed detections", MISSED_ROWS, scenes=("crowd",)),
+    RunSet("sensitivity on the object scenes", SENSITIVITY, scenes=OBJECT_SCENES),
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
                          STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT, WS_EQ4, BG_INSTANCES, WS_NO_DILATE,

@@ -37,7 +37,7 @@ def test_runs_per_sequence_follow_the_run_sets():
     xyz = E.runs_for("synthetic", "walking_xyz")
     assert len(xyz) == 21 and xyz[-1] is E.BG_ALL_VIEWS and E.BGRESTORE in xyz
     carry = E.runs_for("synthetic", "walking_carry")
-    assert carry == [E.STATIC_DENSE, E.OPENCV_ODOMETRY, E.DEPTHCLUSTER, *E.OBJECT_ROWS]
+    assert carry == [E.STATIC_DENSE, E.OPENCV_ODOMETRY, E.DEPTHCLUSTER, *E.OBJECT_ROWS, *E.SENSITIVITY]
     assert E.DC_PAPER not in carry and E.DC_PAPER in E.runs_for("synthetic", "crowd")
     real = E.runs_for("real")
     assert E.WEIGHTEDSTATIC.mask_source("real") == "person" and E.WEIGHTEDSTATIC.mask_source("synthetic") == "oracle"
@@ -199,16 +199,20 @@ def test_paper_a_ablation_has_the_paper_alone_each_addition_and_the_default_per_
     assert rows[0][3] == 0.01 and rows[4][3] == 0.05 and rows[0][10:13] == [0.75, 0.75, 0.6]
 
 
-def test_real_sensitivity_rows_hold_the_default_and_both_budgets_of_each_real_clip():
+def test_sensitivity_rows_hold_the_default_and_both_budgets_of_each_object_scene_and_real_clip():
     from dynslam_lite import tables
 
     assert all(r in E.runs_for("real") for r in E.SENSITIVITY)
+    assert all(r in E.runs_for("synthetic", s) for r in E.SENSITIVITY for s in E.OBJECT_SCENES)
     assert not any(r in E.runs_for("synthetic", "walking_xyz") for r in E.SENSITIVITY)
-    bonn = "real/rgbd_bonn_crowd_dev"
+    bonn, push = "real/rgbd_bonn_crowd_dev", "synthetic/walking_push"
     recs = [_record(bonn, E.WEIGHTEDSTATIC, 0.02), *(_record(bonn, r, a) for r, a in
                                                     zip(E.SENSITIVITY_OF[E.WEIGHTEDSTATIC], (0.01, 0.03)))]
+    recs += [_record(push, E.BGRESTORE, 0.02), *(_record(push, r, a) for r, a in
+                                                 zip(E.SENSITIVITY_OF[E.BGRESTORE], (0.04, 0.03)))]
     recs.append(_record(bonn, E.BGRESTORE, 0.02))  # a base without its variants gives no row
     recs.append(_record("synthetic/walking_xyz", E.WEIGHTEDSTATIC, 0.5))
-    header, rows, _ = tables.real_sensitivity(recs)
-    assert len(rows) == 1 and rows[0][:5] == [bonn, E.WEIGHTEDSTATIC.label, 0.02, 0.01, 0.03]
-    assert abs(rows[0][5] - 0.02) < 1e-12 and rows[0][6] == "3.00"
+    header, rows, _ = tables.sensitivity(recs)
+    assert [r[:2] for r in rows] == [[push, E.BGRESTORE.label], [bonn, E.WEIGHTEDSTATIC.label]]
+    assert rows[1][:5] == [bonn, E.WEIGHTEDSTATIC.label, 0.02, 0.01, 0.03]
+    assert abs(rows[1][5] - 0.02) < 1e-12 and rows[1][6] == "3.00" and rows[0][6] == "2.00"

@@ -19,7 +19,7 @@ and the tracked keyframe poses, so ``T_cur_kf`` comes from the frontend; noteboo
 paper's F -> E -> (R, t) route beside it.
 
 Vectorised: the projection of every keyframe pixel is one matrix product, the splat is one
-``np.bincount`` per channel over the four corners of every point, on the hole's bounding box; a
+``np.bincount`` per channel over the four corners of every point, into the hole's pixels only; a
 coarse pass on every 4th pixel first finds the part of each keyframe's blocks that can land in
 the hole, so only those are projected at full resolution.
 """
@@ -153,40 +153,42 @@ def splat(x: np.ndarray, y: np.ndarray, values: np.ndarray, hole: np.ndarray) ->
     box = _bbox(hole)
     if box is not None:
         r0, r1, c0, c1 = box
-        a, w = _splat_box(x, y, values.T, box)
         crop = hole[r0:r1, c0:c1]
-        acc[r0:r1, c0:c1], wsum[r0:r1, c0:c1] = np.moveaxis(a, 0, -1) * crop[..., None], w * crop
+        a, w = _splat_hole(x, y, values.T, box, crop)
+        acc[r0:r1, c0:c1][crop], wsum[r0:r1, c0:c1][crop] = a.T, w
     return acc, wsum
 
 
-def _splat_box(x, y, values, box):
-    """The sums of :func:`splat` over the pixel centres of ``box`` (row0, row1, col0, col1), not
-    yet restricted to the hole: (acc (C, h, w), wsum (h, w)); ``values`` (C, N), channels first.
+def _splat_hole(x, y, values, box, crop):
+    """The sums of :func:`splat` over the hole pixels ``crop`` of ``box`` (row0, row1, col0, col1):
+    (acc (C, n), wsum (n,)) for the n pixels of ``crop`` in row-major order; ``values`` (C, N),
+    channels first.
 
-    The sums run on the box padded by one pixel with one ``np.bincount`` per channel; points
-    whose four centres all lie outside the box are left out (they give the box nothing).
+    One ``np.bincount`` per channel over the four corners of every point; a lookup table sends
+    every pixel centre outside the hole to one extra bin, which is dropped (each hole pixel sums
+    the same terms in the same order as a sum over the whole box). Points whose four centres
+    all lie outside the box are left out.
     """
     r0, r1, c0, c1 = box
-    h, w = r1 - r0, c1 - c0
-    W2 = w + 2
+    W2 = c1 - c0 + 2  # the box padded by one pixel
     inside = _touches_box(x, y, box)
     if not inside.all():
         x, y, values = x[inside], y[inside], values[:, inside]
     x0, y0 = np.floor(x), np.floor(y)
     xl, yl = x0.astype(np.int64) - (c0 - 1), y0.astype(np.int64) - (r0 - 1)  # padded-box coordinates
     fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
+    n = int(np.count_nonzero(crop))
+    lut = np.full((r1 - r0 + 2, W2), n, np.int64)
+    lut[1:-1, 1:-1][crop] = np.arange(n)
+    lut = lut.ravel()
     base = yl * W2 + xl
-    k = np.concatenate([base, base + 1, base + W2, base + W2 + 1])
+    k = np.concatenate([lut[base], lut[base + 1], lut[base + W2], lut[base + W2 + 1]])
     wt = np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
-
-    def grid(weights):
-        return np.bincount(k, weights, (h + 2) * W2).reshape(h + 2, W2)[1:-1, 1:-1]
-
     w4 = wt.reshape(4, -1)  # the four corners' weights of each point
-    acc = np.empty((len(values), h, w))
+    acc = np.empty((len(values), n))
     for c, channel in enumerate(values):
-        acc[c] = grid((w4 * channel).reshape(-1))
-    return acc, grid(wt)
+        acc[c] = np.bincount(k, (w4 * channel).reshape(-1), n + 1)[:n]
+    return acc, np.bincount(k, wt, n + 1)[:n]
 
 
 def _touches_box(x, y, box) -> np.ndarray:
@@ -264,13 +266,16 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
         near = (vals[3] <= zmin[pix] * (1.0 + depth_tolerance)) & _touches_box(x, y, box)
         if not near.all():
             x, y, vals = x[near], y[near], vals[:, near]
-        acc, ws = _splat_box(x, y, vals, box)
         r0, r1, c0, c1 = box
         crop = hole[r0:r1, c0:c1]
-        wsum[r0:r1, c0:c1] = ws * crop
-        ok = crop & (ws >= min_weight)
-        filled[r0:r1, c0:c1] = ok
+        acc, ws = _splat_hole(x, y, vals, box, crop)
+        v, u = np.nonzero(crop)
+        at = (v + r0) * W + (u + c0)  # the hole pixels, row-major
+        wsum.ravel()[at] = ws
+        ok = ws >= min_weight
+        at = at[ok]
+        filled.ravel()[at] = True
         norm = acc[:, ok] / ws[ok]
-        out_rgb[r0:r1, c0:c1][ok] = np.clip(np.rint(norm[:3].T), 0, 255).astype(np.uint8)
-        out_depth[r0:r1, c0:c1][ok] = norm[3].astype(depth.dtype)
+        out_rgb.reshape(-1, 3)[at] = np.clip(np.rint(norm[:3].T), 0, 255).astype(np.uint8)
+        out_depth.ravel()[at] = norm[3].astype(depth.dtype)
     return Restoration(out_rgb, out_depth, wsum, filled)
