@@ -604,8 +604,9 @@ def sensitivity(results: list[RunRecord]) -> Table:
              "with 1 % fewer or more. Nothing that should matter changes, yet keypoints near the "
              "budget's cut come and go, the matches and keyframes with them: the spread is the "
              "noise of one run, and differences between configurations smaller than it say "
-             "nothing. The same code on another machine of this kind moves a run about as much "
-             "(floating-point differences grow through the tracking). Real clips only with `--data`.")
+             "nothing. The same code on another machine of this kind moves a run as much or more "
+             "(floating-point differences grow through the tracking; bgrestore on walking_push "
+             "1.8x between two machines, see the README). Real clips only with `--data`.")
     return header, rows, notes
 
 
