@@ -240,3 +240,15 @@ def test_new_keypoints_on_a_carried_board_are_kept_out_of_bgrestores_map(scene):
     assert new.precision > 0.75 and new.recall > 0.35 and new.tp > 100, new
     assert "points/new" not in off.scores
     assert on.scores["points/moved"] == off.scores["points/moved"]  # the removal does not depend on the map
+
+
+def test_restored_and_grown_pixels_make_no_map_points_unless_asked():
+    """What bgrestore hands the frontend as ``unmapped`` (tested there): rendered, not measured pixels."""
+    from dynslam_lite.bgrestore import BgRestoreConfig, BgRestoreMethod
+    from dynslam_lite.bgrestore.method import FrameRestoration
+    cam = PinholeCamera(525.0, 525.0, 319.5, 239.5, 640, 480)
+    restored, grown = np.zeros((480, 640), bool), np.zeros((480, 640), bool)
+    restored[10:20, 30:40], grown[50:60, 30:40] = True, True
+    record = ([], FrameRestoration(None, restored, grown, None, None), None)
+    assert np.array_equal(BgRestoreMethod(cam, BgRestoreConfig()).unmapped(record), restored | grown)
+    assert BgRestoreMethod(cam, BgRestoreConfig(map_restored=True)).unmapped(record) is None

@@ -35,13 +35,13 @@ def test_runs_per_sequence_follow_the_run_sets():
         "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic", E.OPENCV_FAST.label]
     assert E.OPENCV_FAST not in E.runs_for("synthetic", "sitting_xyz")
     xyz = E.runs_for("synthetic", "walking_xyz")
-    assert len(xyz) == 21 and xyz[-1] is E.BG_ALL_VIEWS and E.BGRESTORE in xyz
+    assert len(xyz) == 22 and xyz[-1] is E.BG_ALL_VIEWS and E.BGRESTORE in xyz
     carry = E.runs_for("synthetic", "walking_carry")
     assert carry == [E.STATIC_DENSE, E.OPENCV_ODOMETRY, E.DEPTHCLUSTER, *E.OBJECT_ROWS, *E.SENSITIVITY]
     assert E.DC_PAPER not in carry and E.DC_PAPER in E.runs_for("synthetic", "crowd")
     real = E.runs_for("real")
     assert E.WEIGHTEDSTATIC.mask_source("real") == "person" and E.WEIGHTEDSTATIC.mask_source("synthetic") == "oracle"
-    assert E.BG_NO_RESTORE not in real and E.OPENCV_FAST in real and E.STATIC_ORB_PERSON in real
+    assert E.BG_NO_RESTORE in real and E.BG_MAP_RESTORED in real and E.OPENCV_FAST in real and E.STATIC_ORB_PERSON in real
 
 
 def _files():

@@ -220,3 +220,32 @@ def test_the_screening_keeps_a_person_the_masks_miss_out_of_the_map(scene):
     new = on.scores["points/new"]
     assert new.precision > 0.9 and new.recall > 0.7 and new.tp > 500, new
     assert "points/new" not in off.scores
+
+
+def test_keypoints_in_unmapped_pixels_are_tracked_but_make_no_map_points(scene):
+    """paper C's restored pixels (``unmapped``): a keyframe's keypoints there still observe the map
+    points they matched, but only keypoints in measured pixels make new ones."""
+    from dynslam_lite.features import FrontendConfig
+    seq = open_sequence(scene("static_xyz", 150))
+    left = np.zeros((480, 640), bool)
+    left[:, :320] = True
+    trackers = [FeatureTracker(CAM, FrontendConfig(keyframe_max_gap=1)) for _ in range(2)]
+    n0 = []  # map points of the first keyframe
+    for tr, unmapped in zip(trackers, (None, left)):
+        tr.process(seq[0])
+        n0.append(len(tr.map))
+        tf = tr.process(seq[5], unmapped=unmapped)
+        assert tf.ok and tf.keyframe and len(tr.keyframes) == 2
+    plain, ours = (tr.keyframes[1] for tr in trackers)
+
+    def new_points(kf, n_first):  # keypoints whose map point this keyframe made
+        return kf.point_ids >= n_first
+
+    in_left = ours.feats.uv[:, 0] < 320
+    assert np.array_equal(plain.feats.uv, ours.feats.uv)
+    assert (new_points(plain, n0[0]) & in_left).sum() > 50
+    assert not (new_points(ours, n0[1]) & in_left).any()
+    # the measured half still makes points (at least as many: the top-up to min_new_points)
+    assert (new_points(ours, n0[1]) & ~in_left).sum() >= (new_points(plain, n0[0]) & ~in_left).sum() > 20
+    # matched keypoints in the left half still observe the first keyframe's points
+    assert ((ours.point_ids >= 0) & (ours.point_ids < n0[1]) & in_left).sum() > 50

@@ -33,7 +33,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..geometry import PinholeCamera, backproject, invert, normalize_pose, project, transform_points
+from ..geometry import (PinholeCamera, backproject, invert, normalize_pose, project, sample_nearest,
+                        transform_points)
 from ..io import Frame
 from .freespace import free_space_test, nearest_depth
 from .matching import match_descriptors, search_by_projection
@@ -210,12 +211,15 @@ class FeatureTracker:
 
     # ------------------------------------------------------------------ per frame
     def process(self, frame, exclude: np.ndarray | None = None, timer=None,
-                T_init: np.ndarray | None = None, refined: bool = False) -> TrackedFrame:
+                T_init: np.ndarray | None = None, refined: bool = False,
+                unmapped: np.ndarray | None = None) -> TrackedFrame:
         """Track one frame (a :class:`dynslam_lite.io.Frame`); failures are reported, not raised.
 
         ``exclude``: (H, W) bool, keypoints inside are dropped (semantic masks).
         ``T_init``: world-to-camera start of the search (default: the constant-velocity prediction);
         ``refined``: it is already this frame's pose (a trial pose), see :meth:`locate`.
+        ``unmapped``: (H, W) bool, keypoints inside are tracked but never become map points
+        (pixels that were not measured, e.g. paper C's restoration).
         """
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("orb"):
@@ -239,8 +243,8 @@ class FeatureTracker:
         screened = None
         if is_kf:
             with stage("keyframe"):
-                screened = self._add_keyframe(frame, est.T_c_w, feats, mi, ki, est.weights * est.inliers,
-                                              est.dynamic)
+                dynamic = est.dynamic if unmapped is None else est.dynamic | sample_nearest(unmapped, feats.uv)
+                screened = self._add_keyframe(frame, est.T_c_w, feats, mi, ki, est.weights * est.inliers, dynamic)
                 self.last_tracked = n_in
             with stage("local_ba"):
                 self._local_ba()

@@ -39,7 +39,8 @@ class FrontendMethod(Method):
         with timer.stage("masks"):
             instances = self.masks(frame)
         seen, exclude, T_trial, record = self.prepare(frame, instances, timer)
-        tf = self.tracker.process(seen, exclude, timer, T_init=T_trial, refined=T_trial is not None)
+        tf = self.tracker.process(seen, exclude, timer, T_init=T_trial, refined=T_trial is not None,
+                                  unmapped=self.unmapped(record))
         self.n_frames += 1
         return self.tracked(frame, tf, record)
 
@@ -51,6 +52,11 @@ class FrontendMethod(Method):
         keypoints in the (dilated) masks, and no trial."""
         people = union(instances)
         return frame, None if people is None else dilate(people, self.tracker.config.mask_dilate_px), None, None
+
+    def unmapped(self, record) -> np.ndarray | None:
+        """(H, W) bool, pixels of the frame :meth:`prepare` made rather than measured: keypoints there
+        are tracked but never become map points. None here."""
+        return None
 
     def tracked(self, frame, tf: TrackedFrame, record) -> Tracked:
         """What the runner gets for ``frame``; the detail is the frontend's :class:`TrackedFrame`,
