@@ -61,11 +61,13 @@ class Options:
 
 @dataclass(frozen=True)
 class Job:
-    """One run on one sequence: ``sequence`` is 'synthetic/<scene>' or 'real/<folder>'."""
+    """One run on one sequence: ``sequence`` is 'synthetic/<scene>' or 'real/<folder>', tracked
+    every ``stride``-th frame."""
 
     sequence: str
     path: str
     run: Run
+    stride: int = 1
 
     @property
     def kind(self) -> str:
@@ -123,10 +125,12 @@ def papers_data(root: Path) -> tuple[list[str], list[str]]:
 
 
 def plan(scene_paths: dict[str, str], data: list[str]) -> list[Job]:
-    """Every job, synthetic scenes first, in registry order (the tables' row order)."""
+    """Every job, synthetic scenes first, in registry order (the tables' row order); each real
+    sequence every frame, then at the lower frame rates of the registry."""
     jobs = [Job(f"synthetic/{scene}", path, run)
             for scene, path in scene_paths.items() for run in experiments.runs_for("synthetic", scene)]
-    jobs += [Job(f"real/{Path(d).resolve().name}", d, run) for d in data for run in experiments.runs_for("real")]
+    jobs += [Job(f"real/{Path(d).resolve().name}", d, run, n) for d in data for n in experiments.strides()
+             for run in experiments.runs_for("real", stride=n)]
     return jobs
 
 
@@ -295,7 +299,9 @@ def evaluate_run(job: Job) -> Done | Failure:
     run = job.run
     try:
         seq = _open_kept(job.path)
-        _say(f"[run] {job.sequence:32s} {run.label:42s} started ({len(seq)} frames)")
+        if job.stride > 1:
+            seq = seq.window(0, None, job.stride)
+        _say(f"[run] {_name(job):32s} {run.label:42s} started ({len(seq)} frames)")
         masks = run.mask_source(job.kind)
         r = run_method(run.method, seq, run.overrides, masks=masks)
         text = format_trajectory(r.trajectory)
@@ -307,7 +313,7 @@ def evaluate_run(job: Job) -> Done | Failure:
         job.sequence, run.label, run.method, masks, _relative(job.path), len(seq), errors,
         len(r.failed_frames), r.stats()["ms_per_frame"],
         {k: float(sum(v)) / len(seq) for k, v in r.stage_ms.items()}, r.extras, r.scores,
-        r.scored_points, f"{job.sequence}/{file_name(run.label)}.txt")
+        r.scored_points, f"{_name(job)}/{file_name(run.label)}.txt", job.stride)
     return Done(record, text, time.perf_counter() - t)
 
 
@@ -369,7 +375,8 @@ class RunCache:
     def key(self, job: Job) -> str:
         run = job.run
         spec = {"code": self.code, "data": self.data_id(job.path), "sequence": job.sequence, "label": run.label,
-                "method": run.method, "masks": run.mask_source(job.kind), "params": [list(p) for p in run.params]}
+                "method": run.method, "masks": run.mask_source(job.kind), "params": [list(p) for p in run.params],
+                "stride": job.stride}
         return hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()[:32]
 
     def get(self, key: str) -> Done | None:
@@ -388,6 +395,10 @@ class RunCache:
 
 
 # ------------------------------------------------------------------ paths
+def _name(job: Job) -> str:
+    return experiments.sequence_name(job.sequence, job.stride)
+
+
 def file_name(label: str) -> str:
     """A run label (brackets, colons, commas) as a plain file name."""
     return "".join(c if c.isalnum() or c in "._-" else "_" for c in label).strip("_")
@@ -454,7 +465,7 @@ def _reproduce(opt: Options) -> int:
              f"--fresh runs them again), {len(todo)} to run on {workers} worker(s)"
              + (f" of the Dask cluster at {opt.scheduler}" if opt.scheduler else ""))
         for k, (job, o) in enumerate(((j, o) for j, o in zip(jobs, outcomes) if o is not None), 1):
-            _say(f"[cached {k}] {job.sequence:32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
+            _say(f"[cached {k}] {_name(job):32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
         eta = Estimate(Path(opt.reports) / "trajectories" / "runs.json", [jobs[i] for i in todo], lengths, workers)
         _say(eta.plan())
         futures = {pool.submit(evaluate_run, jobs[todo[k]]): todo[k] for k in eta.order([jobs[i] for i in todo])}
@@ -535,14 +546,14 @@ class Estimate:
             pass  # no earlier reproduction: the default rate
         self.ms = {m: sum(v) / len(v) for m, v in measured.items() if v}
         self.lengths = lengths
-        self.runs, self.frames = len(jobs), sum(lengths.get(job.path, 0) for job in jobs)
+        self.runs, self.frames = len(jobs), sum(-(-lengths.get(job.path, 0) // job.stride) for job in jobs)
         self.workers = max(workers, 1)
         self.left = sum(self._seconds(job) for job in jobs)
         self.estimated_done = 0.0
         self.t0 = time.perf_counter()
 
     def _seconds(self, job: Job) -> float:
-        return self.lengths.get(job.path, 0) * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
+        return self.lengths.get(job.path, 0) / job.stride * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
 
     def order(self, jobs: list[Job]) -> list[int]:
         """Submission order, as positions in ``jobs``: the sequence with the most estimated work
@@ -571,10 +582,10 @@ class Estimate:
 
 def _progress(k: int, n: int, outcome, eta: str = "") -> None:
     if isinstance(outcome, Failure):
-        _say(f"[run {k}/{n}] {outcome.job.sequence:32s} {outcome.job.run.label:42s} FAILED {outcome.error}{eta}")
+        _say(f"[run {k}/{n}] {_name(outcome.job):32s} {outcome.job.run.label:42s} FAILED {outcome.error}{eta}")
         return
     rec = outcome.record
-    _say(f"[run {k}/{n}] {rec.sequence:32s} {rec.label:42s} ATE {rec.errors.ate.rmse:.4f} m "
+    _say(f"[run {k}/{n}] {rec.name:32s} {rec.label:42s} ATE {rec.errors.ate.rmse:.4f} m "
          f"RPE {fmt(rec.errors.rpe_trans.rmse)} m/s ({rec.frames} frames, {outcome.seconds:.0f} s{eta})")
 
 
@@ -609,10 +620,10 @@ def _summary(records, failed, nb_times, failed_nbs, run_secs, total_secs) -> Non
     print(f"  runs:      {len(records)} ok, {len(failed)} failed, on {len(seqs)} sequences, "
           f"{run_secs / 60:.1f} min")
     for f in failed:
-        print(f"    FAILED {f.job.sequence} {f.job.run.label}: {f.error}")
+        print(f"    FAILED {_name(f.job)} {f.job.run.label}: {f.error}")
     for r in records:
         if r.failed_frames:
-            print(f"    tracking failed on {r.failed_frames} frame(s): {r.sequence} {r.label}")
+            print(f"    tracking failed on {r.failed_frames} frame(s): {r.name} {r.label}")
     print(f"  notebooks: {len(nb_times) - len(failed_nbs)} ok, {len(failed_nbs)} failed"
           + "".join(f"; {n} {t:.0f} s" for n, t in nb_times.items()))
     for name, err in failed_nbs:

@@ -44,7 +44,7 @@ def cmd_synth(a) -> int:
 
 
 def cmd_run(a) -> int:
-    seq = open_sequence(a.seq_dir, a.camera, a.start, a.frames)
+    seq = open_sequence(a.seq_dir, a.camera, a.start, a.frames, step=a.stride)
     result = run_method(a.method, seq, _parse_sets(a.set), progress=not a.quiet, masks=a.masks)
     write_trajectory(a.out, result.trajectory)
     stats = result.stats()
@@ -177,6 +177,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="trajectory file to write (TUM format)")
     r.add_argument("--start", type=int, default=0)
     r.add_argument("--frames", type=int, default=None)
+    r.add_argument("--stride", type=int, default=1,
+                   help="track every N-th frame (3: a 30 Hz sequence at 10 Hz, larger motion between frames)")
     r.add_argument("--camera", default=None, help="fr1, fr2, fr3 or bonn (default: guessed)")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="method parameter")
     r.add_argument("--stats", help="write run statistics (JSON) here")

@@ -170,14 +170,19 @@ SENSITIVITY = tuple(r for runs in SENSITIVITY_OF.values() for r in runs)
 @dataclass(frozen=True)
 class RunSet:
     """Runs made on a group of sequences: named synthetic scenes (``scenes``; None = every scene
-    of the profile) or every real sequence (``real``)."""
+    of the profile) or every real sequence (``real``), taken every ``stride``-th frame (real
+    sequences only: 3 turns a 30 Hz recording into 10 Hz, with three times the motion between
+    frames)."""
 
     name: str
     runs: tuple[Run, ...]
     scenes: tuple[str, ...] | None = None
     real: bool = False
+    stride: int = 1
 
-    def covers(self, kind: str, scene: str | None) -> bool:
+    def covers(self, kind: str, scene: str | None, stride: int = 1) -> bool:
+        if stride != self.stride:
+            return False
         if kind == "real":
             return self.real
         return not self.real and (self.scenes is None or scene in self.scenes)
@@ -191,6 +196,8 @@ OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FI
 # the same where the mask source misses the near people for a while (the crowd)
 MISSED_ROWS = (STATIC_ORB_MISSED, STATIC_ORB_MISSED_SCREEN, WS_MISSED_NO_SCREEN, WS_MISSED, BG_MISSED_NO_SCREEN,
                BG_MISSED)
+# the methods of the summary figure and of the real clips at lower frame rates
+MAIN = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DEPTHCLUSTER, WEIGHTEDSTATIC, BGRESTORE)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
     RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),
@@ -216,6 +223,10 @@ RUN_SETS = (
                          WS_NO_SCREEN, BG_NO_SCREEN, BG_NO_RESTORE, BG_MAP_RESTORED), real=True),
     RunSet("paper A ablation on real data", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT), real=True),
     RunSet("sensitivity on real data", SENSITIVITY, real=True),
+    # the real clips at a lower frame rate: larger motion between frames, the hard moments of
+    # longer clips (fast turns, motion blur) in a short one
+    RunSet("real data, every 2nd frame", MAIN, real=True, stride=2),
+    RunSet("real data, every 3rd frame", MAIN, real=True, stride=3),
 )
 
 # rows of paper A's ablation table, in order (the default last: every addition on)
@@ -223,21 +234,30 @@ PAPER_A_ABLATION = (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DEPTHCLUSTER)
 # rows of paper B's ablation table, in order
 PAPER_B_ABLATION = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, STATIC_ORB_PERSON, WS_DEGRADED_GEOMETRY,
                     WS_DEGRADED_WEIGHTS, WS_DEGRADED, WEIGHTEDSTATIC, WS_NONE)
-# the methods of the summary figure
-MAIN = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DEPTHCLUSTER, WEIGHTEDSTATIC, BGRESTORE)
 # the papers' baselines: DVO (paper A) and ORB-SLAM2 (papers B and C)
 STATIC_BASELINES = (STATIC_DENSE, STATIC_ORB)
 
 
-def runs_for(kind: str, scene: str | None = None) -> list[Run]:
-    """Every run on a sequence of ``kind`` ('synthetic' with its ``scene``, or 'real'), in the
-    order of :data:`RUN_SETS` (each label once)."""
+def runs_for(kind: str, scene: str | None = None, stride: int = 1) -> list[Run]:
+    """Every run on a sequence of ``kind`` ('synthetic' with its ``scene``, or 'real') taken every
+    ``stride``-th frame, in the order of :data:`RUN_SETS` (each label once)."""
     out: dict[str, Run] = {}
     for s in RUN_SETS:
-        if s.covers(kind, scene):
+        if s.covers(kind, scene, stride):
             for r in s.runs:
                 out.setdefault(r.label, r)
     return list(out.values())
+
+
+def strides() -> tuple[int, ...]:
+    """The frame strides of the run sets, 1 first."""
+    return tuple(sorted({1, *(s.stride for s in RUN_SETS)}))
+
+
+def sequence_name(sequence: str, stride: int = 1) -> str:
+    """A sequence as progress lines, trajectory folders and tables name it: 'real/<folder>', and
+    'real/<folder>/stride3' tracked every 3rd frame."""
+    return sequence if stride == 1 else f"{sequence}/stride{stride}"
 
 
 def all_runs() -> dict[str, Run]:
@@ -262,6 +282,7 @@ class RunRecord:
     extras : the method's own statistics; scores: its verdicts against ground truth
         (:attr:`dynslam_lite.pipeline.RunResult.scores`); scored_points: keypoints scored
     trajectory : the estimate's file, relative to ``trajectories/``
+    stride : the sequence was tracked every ``stride``-th frame (1: every frame)
     """
 
     sequence: str
@@ -278,6 +299,12 @@ class RunRecord:
     scores: dict[str, MaskScores] = field(default_factory=dict)
     scored_points: int = 0
     trajectory: str = ""
+    stride: int = 1
+
+    @property
+    def name(self) -> str:
+        """The sequence with its stride (:func:`sequence_name`)."""
+        return sequence_name(self.sequence, self.stride)
 
     @property
     def is_real(self) -> bool:

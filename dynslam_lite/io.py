@@ -449,14 +449,17 @@ class RGBDSequence:
         path = self.background_files[i].parent.parent / "background_depth" / self.background_files[i].name
         return load_depth(path, self.camera.depth_scale) if path.is_file() else None
 
-    def window(self, start: int = 0, count: int | None = None) -> "RGBDSequence":
-        """Sub-sequence of ``count`` frames from ``start`` (all remaining when None)."""
+    def window(self, start: int = 0, count: int | None = None, step: int = 1) -> "RGBDSequence":
+        """Sub-sequence of ``count`` frames from ``start`` (all remaining when None), every
+        ``step``-th frame (3 turns a 30 Hz recording into 10 Hz: larger motion between frames)."""
         if start < 0 or start >= len(self):
             raise SequenceError(f"{self.root}: start frame {start} outside 0..{len(self) - 1}")
-        stop = len(self) if count is None else min(len(self), start + int(count))
         if count is not None and count <= 0:
             raise SequenceError(f"{self.root}: frame count must be positive, got {count}")
-        sl = slice(start, stop)
+        if step < 1:
+            raise SequenceError(f"{self.root}: frame step must be 1 or more, got {step}")
+        stop = len(self) if count is None else min(len(self), start + int(count) * step)
+        sl = slice(start, stop, step)
         return RGBDSequence(
             self.root, self.camera, self.rgb_files[sl], self.depth_files[sl],
             self.timestamps[sl], self.depth_timestamps[sl], self.groundtruth,
@@ -534,6 +537,7 @@ def open_sequence(
     start: int = 0,
     count: int | None = None,
     max_difference: float = 0.02,
+    step: int = 1,
 ) -> RGBDSequence:
     """Open a TUM / Bonn sequence folder as downloaded.
 
@@ -542,7 +546,7 @@ def open_sequence(
     root : folder with ``rgb.txt`` and ``depth.txt``
     camera : preset name (fr1, fr2, fr3, bonn), a PinholeCamera, or None to guess
         (``camera.txt`` in the folder, else the folder name)
-    start, count : frame window over the associated frames
+    start, count, step : frame window over the associated frames (every ``step``-th frame)
     max_difference : seconds, colour-depth association tolerance (TUM: 0.02)
 
     Ground truth (``groundtruth.txt``), when present, is read as camera-to-world; for Bonn
@@ -606,4 +610,4 @@ def open_sequence(
         np.array([ta[i] for i, _ in matches]), np.array([tb[j] for _, j in matches]),
         gt, masks, backgrounds, root.resolve().name, instances, classes, moving,
     )
-    return seq.window(start, count) if (start or count is not None) else seq
+    return seq.window(start, count, step) if (start or count is not None or step != 1) else seq

@@ -25,6 +25,11 @@ def test_synth_run_evaluate_end_to_end(tmp_path, capsys):
     assert {"load", "align"} <= set(s["stages"]) and s["peak_mem_mib"] > 0
     assert s["params"]["finest_level"] == 2
     assert len(traj.read_text().splitlines()) == 36  # header + 35 poses
+    every3 = tmp_path / "every3.txt"
+    assert main(["run", "static-dense", str(seq), "--out", str(every3), "--stride", "3",
+                 "--set", "finest_level=2", "--quiet"]) == 0
+    stamps = [float(l.split()[0]) for l in every3.read_text().splitlines() if not l.startswith("#")]
+    assert len(stamps) == 14 and stamps[1] - stamps[0] == pytest.approx(0.1, abs=0.01)  # 40 frames at 10 Hz
     capsys.readouterr()
     assert main(["evaluate", str(seq / "groundtruth.txt"), str(traj), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

@@ -44,6 +44,15 @@ def test_runs_per_sequence_follow_the_run_sets():
     assert E.BG_NO_RESTORE in real and E.BG_MAP_RESTORED in real and E.OPENCV_FAST in real and E.STATIC_ORB_PERSON in real
 
 
+def test_the_real_clips_at_lower_frame_rates_run_the_main_methods_only():
+    assert E.strides() == (1, 2, 3)
+    for n in (2, 3):
+        assert E.runs_for("real", stride=n) == list(E.MAIN)
+        assert E.runs_for("synthetic", "walking_xyz", stride=n) == []
+    assert E.BG_NO_RESTORE in E.runs_for("real") and E.BG_NO_RESTORE not in E.runs_for("real", stride=2)
+    assert E.sequence_name("real/x", 3) == "real/x/stride3" and E.sequence_name("real/x") == "real/x"
+
+
 def _files():
     for folder in ("dynslam_lite", "notebooks", "tests"):
         for p in (ROOT / folder).rglob("*"):

@@ -49,6 +49,19 @@ def _write_sequence(root, n=3, depth_dtype=np.uint16, size=(64, 48), depth_size=
     return root
 
 
+def test_every_nth_frame(tmp_path):
+    """A stride keeps every n-th associated frame, colour and depth together, counted as taken."""
+    root = _write_sequence(tmp_path / "s", n=7)
+    seq = open_sequence(root)
+    third = open_sequence(root, step=3)
+    assert len(third) == 3 and list(third.timestamps) == list(seq.timestamps[::3])
+    assert list(third.depth_files) == list(seq.depth_files[::3])
+    assert list(seq.window(1, 2, 2).timestamps) == [seq.timestamps[1], seq.timestamps[3]]
+    assert len(open_sequence(root, start=2, count=10, step=2)) == 3  # frames 2, 4, 6
+    with pytest.raises(SequenceError, match="frame step must be 1 or more, got 0"):
+        open_sequence(root, step=0)
+
+
 def test_reads_valid_sequence_lazily(tmp_path):
     seq = open_sequence(_write_sequence(tmp_path / "s", n=5))
     assert len(seq) == 5 and seq.window(1, 2).timestamps[0] == pytest.approx(10 + 1 / 30)

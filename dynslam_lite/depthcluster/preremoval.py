@@ -86,19 +86,29 @@ class PreRemoval:
 
 
 @lru_cache(maxsize=4)
-def _block_ids(shape: tuple[int, int], rows: int, cols: int) -> np.ndarray:
+def _block_ids(shape: tuple[int, int], rows: int, cols: int) -> tuple[np.ndarray, np.ndarray]:
+    """Block index of every pixel (H, W) and the pixel count of every block."""
     H, W = shape
     bh, bw = H // rows, W // cols
     r = np.minimum(np.arange(H) // bh, rows - 1)
     c = np.minimum(np.arange(W) // bw, cols - 1)
     ids = (r[:, None] * cols + c[None, :]).astype(np.int64)
-    ids.flags.writeable = False
-    return ids
+    px = np.bincount(ids.ravel(), minlength=rows * cols).astype(float)
+    ids.flags.writeable = px.flags.writeable = False
+    return ids, px
 
 
-def _layer_stats(block: np.ndarray, labels: np.ndarray, depth: np.ndarray, K: int, n: int):
-    """Per (block, layer): pixel count and mean depth, as (K, n) arrays."""
-    key = (block * (n + 1) + (labels + 1)).ravel()  # column 0 of each block: no layer (-1)
+@lru_cache(maxsize=16)
+def _layer_keys(shape: tuple[int, int], rows: int, cols: int, n: int) -> np.ndarray:
+    """``block * (n + 1) + 1`` per pixel, flat: the key of (block, layer) is this plus the layer."""
+    keys = (_block_ids(shape, rows, cols)[0] * (n + 1) + 1).ravel()
+    keys.flags.writeable = False
+    return keys
+
+
+def _layer_stats(key: np.ndarray, depth: np.ndarray, K: int, n: int):
+    """Per (block, layer): pixel count and mean depth, as (K, n) arrays; ``key`` is
+    ``block * (n + 1) + labels + 1`` (column 0 of each block: no layer, label -1)."""
     count = np.bincount(key, minlength=K * (n + 1)).reshape(K, n + 1)[:, 1:].astype(float)
     total = np.bincount(key, weights=depth.ravel(), minlength=K * (n + 1)).reshape(K, n + 1)[:, 1:]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -119,12 +129,12 @@ def pre_remove(
     cfg = config or PreRemovalConfig()
     shape = clusters_ref.labels.shape
     K, n = cfg.rows * cfg.cols, max(clusters_ref.n, 1)
-    block = _block_ids(shape, cfg.rows, cfg.cols)
+    block, px = _block_ids(shape, cfg.rows, cfg.cols)
     lab_a = clusters_ref.labels
     lab_b = assign(depth_cur_filled, clusters_ref.centres) if clusters_ref.n else lab_a
-    cnt_a, mean_a = _layer_stats(block, lab_a, clusters_ref.filled, K, n)
-    cnt_b, mean_b = _layer_stats(block, lab_b, depth_cur_filled, K, n)
-    px = np.bincount(block.ravel(), minlength=K).astype(float)
+    base = _layer_keys(shape, cfg.rows, cfg.cols, n)
+    cnt_a, mean_a = _layer_stats(base + lab_a.ravel(), clusters_ref.filled, K, n)
+    cnt_b, mean_b = _layer_stats(base + lab_b.ravel(), depth_cur_filled, K, n)
     frac_a, frac_b = cnt_a / px[:, None], cnt_b / px[:, None]
     present = frac_a >= cfg.min_fraction
     edge = present.sum(axis=1) >= 2
@@ -181,9 +191,9 @@ def _remove_regions(labels, block, dynamic, moving, cfg: PreRemovalConfig) -> np
         order = np.lexsort((c_of, -area[c_of], b_of))  # per block: largest first, then lowest id
         first = np.ones(order.size, bool)
         first[1:] = b_of[order][1:] != b_of[order][:-1]
-        kind = np.zeros(n_cc, np.uint8)  # 1: a chosen region, 2: one cut to the dynamic blocks' area
-        chosen = c_of[order][first]
-        kind[chosen] = np.where(area[chosen] > limit, 2, 1)
-        taken = kind[cc]
-        mask |= (taken == 1) | ((taken == 2) & near_dyn_px)
+        for c in np.unique(c_of[order][first]):  # the chosen regions (a few)
+            region = cc == c
+            if area[c] > limit:  # cut to the dynamic blocks' area
+                region &= near_dyn_px
+            mask |= region
     return mask
