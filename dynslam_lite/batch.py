@@ -73,6 +73,11 @@ class Job:
     def kind(self) -> str:
         return self.sequence.split("/", 1)[0]
 
+    @property
+    def name(self) -> str:
+        """The sequence with its stride (:func:`experiments.sequence_name`)."""
+        return experiments.sequence_name(self.sequence, self.stride)
+
 
 @dataclass
 class Done:
@@ -301,7 +306,7 @@ def evaluate_run(job: Job) -> Done | Failure:
         seq = _open_kept(job.path)
         if job.stride > 1:
             seq = seq.window(0, None, job.stride)
-        _say(f"[run] {_name(job):32s} {run.label:42s} started ({len(seq)} frames)")
+        _say(f"[run] {job.name:32s} {run.label:42s} started ({len(seq)} frames)")
         masks = run.mask_source(job.kind)
         r = run_method(run.method, seq, run.overrides, masks=masks)
         text = format_trajectory(r.trajectory)
@@ -313,7 +318,7 @@ def evaluate_run(job: Job) -> Done | Failure:
         job.sequence, run.label, run.method, masks, _relative(job.path), len(seq), errors,
         len(r.failed_frames), r.stats()["ms_per_frame"],
         {k: float(sum(v)) / len(seq) for k, v in r.stage_ms.items()}, r.extras, r.scores,
-        r.scored_points, f"{_name(job)}/{file_name(run.label)}.txt", job.stride)
+        r.scored_points, f"{job.name}/{file_name(run.label)}.txt", job.stride)
     return Done(record, text, time.perf_counter() - t)
 
 
@@ -395,10 +400,6 @@ class RunCache:
 
 
 # ------------------------------------------------------------------ paths
-def _name(job: Job) -> str:
-    return experiments.sequence_name(job.sequence, job.stride)
-
-
 def file_name(label: str) -> str:
     """A run label (brackets, colons, commas) as a plain file name."""
     return "".join(c if c.isalnum() or c in "._-" else "_" for c in label).strip("_")
@@ -465,7 +466,7 @@ def _reproduce(opt: Options) -> int:
              f"--fresh runs them again), {len(todo)} to run on {workers} worker(s)"
              + (f" of the Dask cluster at {opt.scheduler}" if opt.scheduler else ""))
         for k, (job, o) in enumerate(((j, o) for j, o in zip(jobs, outcomes) if o is not None), 1):
-            _say(f"[cached {k}] {_name(job):32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
+            _say(f"[cached {k}] {job.name:32s} {job.run.label:42s} ATE {o.record.errors.ate.rmse:.4f} m")
         eta = Estimate(Path(opt.reports) / "trajectories" / "runs.json", [jobs[i] for i in todo], lengths, workers)
         _say(eta.plan())
         futures = {pool.submit(evaluate_run, jobs[todo[k]]): todo[k] for k in eta.order([jobs[i] for i in todo])}
@@ -546,14 +547,18 @@ class Estimate:
             pass  # no earlier reproduction: the default rate
         self.ms = {m: sum(v) / len(v) for m, v in measured.items() if v}
         self.lengths = lengths
-        self.runs, self.frames = len(jobs), sum(-(-lengths.get(job.path, 0) // job.stride) for job in jobs)
+        self.runs, self.frames = len(jobs), sum(self._frames(job) for job in jobs)
         self.workers = max(workers, 1)
         self.left = sum(self._seconds(job) for job in jobs)
         self.estimated_done = 0.0
         self.t0 = time.perf_counter()
 
+    def _frames(self, job: Job) -> int:
+        """Frames the job tracks: every ``stride``-th of the sequence, the first included."""
+        return -(-self.lengths.get(job.path, 0) // job.stride)
+
     def _seconds(self, job: Job) -> float:
-        return self.lengths.get(job.path, 0) / job.stride * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
+        return self._frames(job) * self.ms.get(job.run.method, self.DEFAULT_MS) / 1000.0
 
     def order(self, jobs: list[Job]) -> list[int]:
         """Submission order, as positions in ``jobs``: the sequence with the most estimated work
@@ -582,7 +587,7 @@ class Estimate:
 
 def _progress(k: int, n: int, outcome, eta: str = "") -> None:
     if isinstance(outcome, Failure):
-        _say(f"[run {k}/{n}] {_name(outcome.job):32s} {outcome.job.run.label:42s} FAILED {outcome.error}{eta}")
+        _say(f"[run {k}/{n}] {outcome.job.name:32s} {outcome.job.run.label:42s} FAILED {outcome.error}{eta}")
         return
     rec = outcome.record
     _say(f"[run {k}/{n}] {rec.name:32s} {rec.label:42s} ATE {rec.errors.ate.rmse:.4f} m "
@@ -620,7 +625,7 @@ def _summary(records, failed, nb_times, failed_nbs, run_secs, total_secs) -> Non
     print(f"  runs:      {len(records)} ok, {len(failed)} failed, on {len(seqs)} sequences, "
           f"{run_secs / 60:.1f} min")
     for f in failed:
-        print(f"    FAILED {_name(f.job)} {f.job.run.label}: {f.error}")
+        print(f"    FAILED {f.job.name} {f.job.run.label}: {f.error}")
     for r in records:
         if r.failed_frames:
             print(f"    tracking failed on {r.failed_frames} frame(s): {r.name} {r.label}")

@@ -217,9 +217,13 @@ def paper_a_ablation(results: list[RunRecord]) -> Table:
              "(the previous pair's mask carried into this pair's first estimate), 'grow' (a "
              "depth-layer region mostly made of outliers is taken whole), 'cut' (a pre-removal region "
              "larger than 25 % of the image, a floor or wall sharing the person's layer, is cut to "
-             "the dynamic blocks and their neighbours); the default has these three and the release: "
-             "the removed pixels that the final pose explains (photometric and depth inliers outside "
-             "regions full of outliers) go back to the background. The release changes the reported "
+             "the dynamic blocks and their neighbours); the default has these three, the pose selection "
+             "and the release. 'no-select' is the default reporting always the last estimate of a pair; "
+             "the default reports the prediction or an earlier estimate instead when its median absolute "
+             "photometric residual over the reference pixels is more than 25 % lower (DepthClusterConfig."
+             "select_margin: a pose that followed the people leaves most of the static room misaligned). "
+             "The release: the removed pixels that the final pose explains (photometric and depth inliers "
+             "outside regions full of outliers) go back to the background. The release changes the reported "
              "mask only, not the pose: compare 'pose' and 'final' columns of the default row. "
              "Common to every row: the solver at half resolution and the early stop when the mask is "
              "stable (DepthClusterConfig). Area: mean fraction of the reference pixels; P / R / IoU: "
@@ -625,7 +629,7 @@ def real_frame_rate(results: list[RunRecord]) -> Table:
               "failed frames", "worst / every frame"]
     rows = []
     for seq in sorted({r.sequence for r in results if r.is_real and r.stride > 1}):
-        for run in E.MAIN:
+        for run in E.FRAME_RATE_ROWS:
             recs = [idx.get((seq, run.label, n)) for n in strides]
             if recs[0] is None or all(r is None for r in recs[1:]):
                 continue
@@ -639,7 +643,8 @@ def real_frame_rate(results: list[RunRecord]) -> Table:
              + " and ".join(f"{30 / n:g} Hz" for n in strides[1:]) + "): the motion between frames "
              "grows as in the fast turns of a longer recording, and a person crosses more of the image "
              "between two frames. 'frames' and 'failed frames' per column, in the same order. Masks as in "
-             "the other real rows (the person model for weightedstatic and bgrestore). One run per cell: "
+             "the other real rows (the person model for weightedstatic and bgrestore); "
+             f"'{E.DC_NO_SELECT.label}' is depthcluster without its pose selection. One run per cell: "
              "the sensitivity table says how far a single run moves. Real clips only with `--data`.")
     return header, rows, notes
 
@@ -653,39 +658,40 @@ def timing(results: list[RunRecord]) -> Table:
     return ["sequence", "method", "ms/frame"], rows, notes
 
 
-# Every table of the batch: file stem under tables/, title, function of the evaluated runs.
+# Every table of the batch: file stem under tables/, title, function of the evaluated runs, and
+# whether it takes the runs on real clips at lower frame rates too (the others: every frame only).
 REPORT_TABLES = (
-    ("summary", "Every method on every sequence (measured)", summary),
-    ("paper_a_table1", "Paper A, Table 1: relative pose error (RMSE)", paper_a_table1),
-    ("paper_a_table2", "Paper A, Table 2: absolute trajectory error (m)", paper_a_table2),
-    ("paper_a_masks", "Paper A: moving-object masks of depthcluster against ground truth", paper_a_masks),
-    ("paper_a_ablation", "Paper A: what each of our additions to depthcluster adds (ablation)", paper_a_ablation),
-    ("paper_b_table1", "Paper B, Table 1: absolute trajectory error (m)", paper_b_table1),
-    ("paper_b_table2", "Paper B, Table 2: relative pose error (translation)", paper_b_table2),
-    ("paper_b_table3", "Paper B, Table 3: ATE against other systems (m)", paper_b_table3),
-    ("paper_b_table4", "Paper B, Table 4: tracking time per frame", paper_b_table4),
-    ("paper_b_ablation", "Paper B: what the geometric test and the weights add over masks", paper_b_ablation),
-    ("paper_b_points", "Paper B: dynamic-point classification against ground truth", paper_b_points),
-    ("paper_bc_objects", "Papers B and C on our object scenes (carry, push, crowd)", paper_bc_objects),
-    ("paper_c_table1", "Paper C, Table 1: ATE against the baseline (m)", paper_c_table1),
-    ("paper_c_table2", "Paper C, Table 2: ATE against other systems (m)", paper_c_table2),
-    ("paper_c_table3", "Paper C, Table 3: relative translation error", paper_c_table3),
-    ("paper_c_table4", "Paper C, Table 4: relative rotation error", paper_c_table4),
-    ("paper_c_restoration", "Paper C: removed and restored area", paper_c_restoration),
-    ("sensitivity", "How far one ATE moves when nothing that matters changes", sensitivity),
-    ("real_frame_rate", "Real clips at lower frame rates: larger motion between frames", real_frame_rate),
-    ("timing", "Time per frame of every run (machine-dependent)", timing),
+    ("summary", "Every method on every sequence (measured)", summary, False),
+    ("paper_a_table1", "Paper A, Table 1: relative pose error (RMSE)", paper_a_table1, False),
+    ("paper_a_table2", "Paper A, Table 2: absolute trajectory error (m)", paper_a_table2, False),
+    ("paper_a_masks", "Paper A: moving-object masks of depthcluster against ground truth", paper_a_masks, False),
+    ("paper_a_ablation", "Paper A: what each of our additions to depthcluster adds (ablation)", paper_a_ablation, False),
+    ("paper_b_table1", "Paper B, Table 1: absolute trajectory error (m)", paper_b_table1, False),
+    ("paper_b_table2", "Paper B, Table 2: relative pose error (translation)", paper_b_table2, False),
+    ("paper_b_table3", "Paper B, Table 3: ATE against other systems (m)", paper_b_table3, False),
+    ("paper_b_table4", "Paper B, Table 4: tracking time per frame", paper_b_table4, False),
+    ("paper_b_ablation", "Paper B: what the geometric test and the weights add over masks", paper_b_ablation, False),
+    ("paper_b_points", "Paper B: dynamic-point classification against ground truth", paper_b_points, False),
+    ("paper_bc_objects", "Papers B and C on our object scenes (carry, push, crowd)", paper_bc_objects, False),
+    ("paper_c_table1", "Paper C, Table 1: ATE against the baseline (m)", paper_c_table1, False),
+    ("paper_c_table2", "Paper C, Table 2: ATE against other systems (m)", paper_c_table2, False),
+    ("paper_c_table3", "Paper C, Table 3: relative translation error", paper_c_table3, False),
+    ("paper_c_table4", "Paper C, Table 4: relative rotation error", paper_c_table4, False),
+    ("paper_c_restoration", "Paper C: removed and restored area", paper_c_restoration, False),
+    ("sensitivity", "How far one ATE moves when nothing that matters changes", sensitivity, False),
+    ("real_frame_rate", "Real clips at lower frame rates: larger motion between frames", real_frame_rate, True),
+    ("timing", "Time per frame of every run (machine-dependent)", timing, True),
 )
 
 
 def write_all(results: list[RunRecord], root, source: str) -> list[str]:
     """Write every table of :data:`REPORT_TABLES` under ``root/tables`` (``source`` ends each
-    table's notes: the command and data). Runs on a real clip at a lower frame rate appear in
-    ``real_frame_rate`` and ``timing`` only. Returns the stems written."""
+    table's notes: the command and data). Runs on a real clip at a lower frame rate go to the
+    tables flagged for them only. Returns the stems written."""
     from .reports import write_table
 
     every_frame = [r for r in results if r.stride == 1]
-    for stem, title, make in REPORT_TABLES:
-        header, rows, notes = make(results if make in (real_frame_rate, timing) else every_frame)
+    for stem, title, make, strided in REPORT_TABLES:
+        header, rows, notes = make(results if strided else every_frame)
         write_table(root, f"tables/{stem}", title, header, rows, notes=notes + " " + source)
-    return [stem for stem, _, _ in REPORT_TABLES]
+    return [entry[0] for entry in REPORT_TABLES]

@@ -4,7 +4,8 @@ import pytest
 
 from conftest import render_clean
 from dynslam_lite.depthcluster import (DepthClusterConfig, OutlierConfig, cluster_count, cluster_depth,
-                                       estimate_pair, fill_edge_zeros, fill_holes, outliers, pre_remove, release)
+                                       estimate_pair, fill_edge_zeros, fill_holes, outliers, pre_remove, release,
+                                       residuals)
 from dynslam_lite.depthcluster.clustering import _kmeans_1d, layer_components
 from dynslam_lite.evaluation import MaskScores, evaluate
 from dynslam_lite.geometry import invert, se3_exp
@@ -171,3 +172,52 @@ def test_depthcluster_deterministic_and_reports_failure(scene):
     res = estimate_pair(g, seq[0].depth, g, np.zeros_like(seq[0].depth), seq.camera,
                         T_init=se3_exp([0, 0, 0, 0, 3.0, 0]))
     assert not res.ok and res.reason
+
+
+def _static_pair(T_cur_ref):
+    r = SceneRenderer("static_xyz", 0)
+    T_w_ref = r.pose(0.5)
+    g0, d0, _ = render_clean(r, T_w_ref)
+    g1, d1, _ = render_clean(r, T_w_ref @ invert(T_cur_ref))
+    return r.camera, g0, d0, g1, d1
+
+
+def test_grid_residual_is_the_residual_image_on_its_grid():
+    from dynslam_lite.depthcluster import method
+    from dynslam_lite.depthcluster.method import grid_residual, median_residual
+
+    T = se3_exp([0.02, -0.01, 0.015, 0.01, -0.02, 0.005])
+    cam, g0, d0, g1, d1 = _static_pair(T)
+    full = residuals(g0, d0, g1, d1, cam, T)[0]
+    grid = grid_residual(g0, d0, g1, cam, T)
+    step = method.SCORE_STEP
+    assert np.array_equal(grid, full[::step, ::step], equal_nan=True) and np.isfinite(grid).mean() > 0.5
+    valid = d0 > 0
+    assert median_residual(grid, valid) == median_residual(full, valid) < 1e-3  # the true pose explains it
+    assert median_residual(grid_residual(g0, d0, g1, cam, se3_exp([0.05, 0, 0, 0, 0, 0]) @ T), valid) > 0.01
+
+
+def test_pose_selection_reports_the_prediction_when_the_estimates_explain_the_image_worse(monkeypatch):
+    from dynslam_lite.depthcluster import method
+    from dynslam_lite.odometry.dense import DenseResult
+
+    T = se3_exp([0.01, -0.005, 0.01, 0.004, -0.006, 0.002])
+    cam, g0, d0, g1, d1 = _static_pair(T)
+    err = lambda P: np.linalg.norm((invert(T) @ P)[:3, 3])
+    # a solver that always lands 5 cm off (as one following a person does)
+    wrong = se3_exp([0.05, 0.0, 0.0, 0.0, 0.0, 0.0]) @ T
+    monkeypatch.setattr(method, "align", lambda *a, **k: DenseResult(wrong.copy(), True, "", 1000))
+    res = estimate_pair(g0, d0, g1, d1, cam, T_init=T)
+    assert res.chosen == "prediction" and err(res.T_cur_ref) < 1e-9
+    off = estimate_pair(g0, d0, g1, d1, cam, T_init=T, config=DepthClusterConfig(select_margin=0.0))
+    assert off.chosen == "last estimate" and abs(err(off.T_cur_ref) - 0.05) < 1e-6
+
+
+def test_pose_selection_keeps_a_good_estimate_over_a_poor_prediction():
+    T = se3_exp([0.01, -0.005, 0.01, 0.004, -0.006, 0.002])
+    cam, g0, d0, g1, d1 = _static_pair(T)
+    T_pred = se3_exp([0.03, 0.0, -0.02, 0.0, 0.01, 0.0]) @ T  # 3.6 cm and 0.6 degrees off
+    cfg = DepthClusterConfig(dense=DenseConfig(finest_level=0))
+    res = estimate_pair(g0, d0, g1, d1, cam, T_init=T_pred, config=cfg)
+    assert res.ok and res.chosen == "last estimate"
+    assert np.linalg.norm((invert(T) @ res.T_cur_ref)[:3, 3]) < 1e-3
