@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import signal
 import sys
 import threading
@@ -17,7 +18,7 @@ from .errors import ConfigError, Interrupted, SequenceError, UserError
 from .evaluation import evaluate
 from .io import atomic_write_text, open_sequence, read_groundtruth, read_trajectory, write_trajectory
 from .masks import SOURCES
-from .pipeline import METHODS, parse_value, run_method
+from .pipeline import METHODS, parse_value, run_method, track_frames
 from .synth import SCENES, generate
 
 # bench: the methods of the papers' tables and their baselines
@@ -86,16 +87,24 @@ def cmd_evaluate(a) -> int:
 def cmd_bench(a) -> int:
     """Print ms/frame per stage of every method on the same frames, and the generator's rate.
 
-    A stage that runs on some frames only (later background updates) is averaged over the
-    frames that ran it; 'frames' says how many. With ``--repeat N`` the methods run N rounds,
-    each round in a rotated order; the stages are those of the first round, the ratio to
-    opencv-odometry is taken within each round (the same minutes of a shared machine) and its
-    median and range over the rounds printed.
+    The methods track the frames in lockstep: frame i of every method, in an order rotated from
+    frame to frame, before frame i + 1 of any (:func:`~dynslam_lite.pipeline.track_frames`;
+    ``--chunk`` frames at a time), so a shared machine that slows down for a few seconds slows
+    every method alike. Measured on the first 40 frames of the Bonn dev clip, 4 rounds,
+    depthcluster against opencv-odometry: one method after the other 1.19x (1.05-1.30) and
+    1.28x (1.08-1.31), frame by frame 1.25x (1.24-1.29). A stage that runs
+    on some frames only (later background updates) is averaged over the frames that ran it;
+    'frames' says how many. With ``--repeat N`` this runs N rounds; the stages are those of the
+    first round, the ratio to opencv-odometry is taken within each round and its median and
+    range over the rounds printed. Peak memory is that of the process, all methods together
+    (``run`` prints one method's).
     """
     import numpy as np
 
     if a.repeat < 1:
         raise ConfigError(f"--repeat {a.repeat}: the methods need at least one round")
+    if a.chunk < 1:
+        raise ConfigError(f"--chunk {a.chunk}: each turn tracks at least one frame")
     cache = Path(a.cache)
     if a.seq:
         seq = open_sequence(a.seq, a.camera, 0, a.frames)
@@ -116,25 +125,37 @@ def cmd_bench(a) -> int:
         masks_of[method] = a.masks if a.masks and spec != "none" else spec
     without_masks: dict[str, list[float]] = {m: [] for m in methods}  # ms/frame of each round
     for k in range(a.repeat):
-        for method in methods[k % len(methods):] + methods[:k % len(methods)]:
-            masks = masks_of[method]
-            r = run_method(method, seq, masks=masks)
+        steps = {m: track_frames(m, seq, masks=masks_of[m]) for m in methods}
+        for n, i in enumerate(range(0, len(seq), a.chunk)):
+            turn = (n + k) % len(methods)
+            for method in methods[turn:] + methods[:turn]:
+                for _ in range(i, min(i + a.chunk, len(seq))):
+                    next(steps[method])
+        results = {}
+        for method, step in steps.items():
+            try:
+                next(step)
+            except StopIteration as done:
+                results[method] = done.value
+        for method, r in results.items():
             without_masks[method].append(
                 (np.sum(r.frame_ms) - np.sum(r.stage_ms.get("masks", []))) / len(r.frame_ms))
             if k:
                 continue
-            if masks != "none":
-                print(f"{method:18s} (masks {masks})")
+            if masks_of[method] != "none":
+                print(f"{method:18s} (masks {masks_of[method]})")
             for stage, ms in r.stage_ms.items():
                 print(f"{method:18s} {stage:10s} {np.mean(ms):9.1f} {np.median(ms):10.1f} {len(ms):7d}")
             s = r.stats()
-            print(f"{method:18s} {'total':10s} {s['ms_per_frame']:9.1f} {np.median(r.frame_ms):10.1f}"
-                  f"   peak memory {s['peak_mem_mib']:.0f} MiB")
+            print(f"{method:18s} {'total':10s} {s['ms_per_frame']:9.1f} {np.median(r.frame_ms):10.1f}")
+    print(f"peak memory of this process, the {len(methods)} methods together: "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0:.0f} MiB")
     if "opencv-odometry" in without_masks:  # speed claims: ratios within one round
         ref = np.asarray(without_masks["opencv-odometry"])
         n = len(ref)
         print("ms/frame without the mask source (segmentation), and the ratio to opencv-odometry "
-              f"on the same frames in this run{f' (median of {n} rounds, range of the ratio)' if n > 1 else ''}:")
+              f"on the same frames in this run, {a.chunk} frame(s) per turn"
+              f"{f' (median of {n} rounds, range of the ratio)' if n > 1 else ''}:")
         for method, ms in without_masks.items():
             ratio = np.asarray(ms) / ref
             spread = f"  ({ratio.min():.2f}-{ratio.max():.2f})" if n > 1 else ""
@@ -203,7 +224,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--camera", default=None)
     b.add_argument("--methods", nargs="+", default=list(BENCHED), choices=sorted(METHODS))
     b.add_argument("--repeat", type=int, default=1,
-                   help="rounds over the methods, order rotated each round; prints the median ratio")
+                   help="rounds over the frames, all methods in lockstep; prints the median ratio")
+    b.add_argument("--chunk", type=int, default=1,
+                   help="frames each method tracks before the next one takes its turn (--frames: "
+                        "one method after the other)")
     b.add_argument("--cache", default=str(batch.DEFAULT_CACHE))
     b.add_argument("--masks", default=None,
                    help="mask source of weightedstatic (default: oracle on the synthetic scene, "

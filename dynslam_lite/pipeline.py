@@ -302,6 +302,38 @@ def run_method(
     keep : frame indices whose ``detail`` (the method's record of the pair ending there) is
         kept in ``RunResult.frames``
     """
+    steps = track_frames(method, seq, params, masks, keep)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(seq), desc=f"{method} {seq.name}", unit="frame")
+    try:
+        while True:
+            out = next(steps)
+            if bar is not None:
+                bar.update()
+            if on_frame:
+                on_frame(out.index)
+    except StopIteration as done:
+        return done.value
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def track_frames(
+    method: str,
+    seq: RGBDSequence,
+    params: dict[str, Any] | None = None,
+    masks: str = "none",
+    keep: Collection[int] | None = None,
+) -> typing.Generator[FrameOutput, None, RunResult]:
+    """:func:`run_method` one frame at a time: yields each frame's :class:`FrameOutput` as it is
+    tracked and returns the :class:`RunResult` (``StopIteration.value``). ``bench`` steps several
+    methods frame by frame in turn, so that each frame's times of all methods are taken in the
+    same second of a shared machine. The method and its parameters are checked here, before the
+    first frame is asked for."""
     if method not in METHODS:
         raise ConfigError(f"unknown method {method!r}: choose one of {', '.join(sorted(METHODS))}")
     if len(seq) < 2:
@@ -314,19 +346,19 @@ def run_method(
         raise ConfigError(f"method {method!r} does not use semantic masks (got --masks {masks})")
     else:
         tracker = cls(seq.camera, config)
-    keep = set(keep or ())
+    return _track(method, seq, tracker, config, masks, set(keep or ()))
+
+
+def _track(method: str, seq: RGBDSequence, tracker: Method, config, masks: str,
+           keep: set[int]) -> typing.Generator[FrameOutput, None, RunResult]:
+    """The frame loop of :func:`track_frames`."""
     poses = [np.eye(4)]
     frames: list[FrameOutput] = []
     scorer = _Scorer()
     velocity = np.eye(4)  # T_cur_ref of the last frame pair
-    iterator = range(len(seq))
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(iterator, desc=f"{method} {seq.name}", unit="frame")
     ref = None
     valid_depth = 0.0  # sum over frames of the valid-depth fraction
-    for i in iterator:
+    for i in range(len(seq)):
         timer = StageTimer()
         t0 = time.perf_counter()
         with timer.stage("load"):
@@ -353,8 +385,7 @@ def run_method(
         out.ms = (time.perf_counter() - t0) * 1000.0
         out.stages = dict(timer.frame)
         frames.append(out)
-        if on_frame:
-            on_frame(i)
+        yield out
     refined = tracker.refined_trajectory()
     if refined is not None:  # keyframe-based: final poses after bundle adjustment
         poses = list(refined)

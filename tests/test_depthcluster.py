@@ -182,19 +182,19 @@ def _static_pair(T_cur_ref):
     return r.camera, g0, d0, g1, d1
 
 
-def test_grid_residual_is_the_residual_image_on_its_grid():
-    from dynslam_lite.depthcluster import method
-    from dynslam_lite.depthcluster.method import grid_residual, median_residual
+def test_strided_residuals_are_the_residual_images_on_their_grid():
+    from dynslam_lite.depthcluster.method import SCORE_STEP, median_residual
 
     T = se3_exp([0.02, -0.01, 0.015, 0.01, -0.02, 0.005])
     cam, g0, d0, g1, d1 = _static_pair(T)
-    full = residuals(g0, d0, g1, d1, cam, T)[0]
-    grid = grid_residual(g0, d0, g1, cam, T)
-    step = method.SCORE_STEP
-    assert np.array_equal(grid, full[::step, ::step], equal_nan=True) and np.isfinite(grid).mean() > 0.5
+    full = residuals(g0, d0, g1, d1, cam, T)
+    grid = residuals(g0, d0, g1, d1, cam, T, step=SCORE_STEP)
+    for f, g in zip(full, grid):
+        assert np.array_equal(g, f[::SCORE_STEP, ::SCORE_STEP], equal_nan=True) and np.isfinite(g).mean() > 0.5
     valid = d0 > 0
-    assert median_residual(grid, valid) == median_residual(full, valid) < 1e-3  # the true pose explains it
-    assert median_residual(grid_residual(g0, d0, g1, cam, se3_exp([0.05, 0, 0, 0, 0, 0]) @ T), valid) > 0.01
+    assert median_residual(grid[0], valid) == median_residual(full[0], valid) < 1e-3  # the true pose explains it
+    off = residuals(g0, d0, g1, d1, cam, se3_exp([0.05, 0, 0, 0, 0, 0]) @ T, step=SCORE_STEP)[0]
+    assert median_residual(off, valid) > 0.01
 
 
 def test_pose_selection_reports_the_prediction_when_the_estimates_explain_the_image_worse(monkeypatch):

@@ -59,6 +59,27 @@ def test_static_dense_deterministic(scene):
     assert np.array_equal(a, b)
 
 
+def test_methods_stepped_in_turn_give_the_runs_of_each_alone(scene):
+    """``bench`` steps methods frame by frame in turn (track_frames): no state is shared."""
+    from dynslam_lite.pipeline import track_frames
+
+    seq = open_sequence(scene("walking_xyz", 150), start=0, count=8)
+    steps = {m: track_frames(m, seq) for m in ("static-dense", "depthcluster")}
+    done, seen = {}, {m: [] for m in steps}
+    for _ in range(len(seq) + 1):
+        for m, step in steps.items():
+            try:
+                seen[m].append(next(step).index)
+            except StopIteration as stop:
+                done[m] = stop.value
+    assert all(idx == list(range(len(seq))) for idx in seen.values())
+    for m, r in done.items():
+        alone = run_method(m, seq)
+        assert len(r.frames) == len(seq) and np.array_equal(r.trajectory.poses, alone.trajectory.poses)
+        assert r.extras == alone.extras
+    assert not np.array_equal(done["static-dense"].trajectory.poses, done["depthcluster"].trajectory.poses)
+
+
 def test_static_dense_on_real_fr2_desk_below_3cm():
     seq = open_sequence(need(FR2_DESK))
     e = evaluate(seq.groundtruth, run_method("static-dense", seq).trajectory)

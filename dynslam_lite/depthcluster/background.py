@@ -20,6 +20,7 @@ explains, for the reported mask.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -52,7 +53,7 @@ class OutlierConfig:
 def residuals(
     gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, depth_cur: np.ndarray,
     camera: PinholeCamera, T_cur_ref: np.ndarray, warp: tuple | None = None,
-    samples: np.ndarray | None = None,
+    samples: np.ndarray | None = None, step: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Photometric and depth residual images on the reference pixels (NaN where undefined).
 
@@ -60,14 +61,20 @@ def residuals(
     ----------
     gray_ref, gray_cur : (H, W) float32 in [0, 1]
     depth_ref, depth_cur : (H, W) float32 metres
-    warp : ``warp_coordinates(camera, depth_ref, T_cur_ref)`` when the caller has it
+    warp : ``warp_coordinates`` of the reference pixels used, when the caller has it
     samples : ``current_samples(gray_cur, depth_cur)`` when the caller has it
+    step : residuals of every ``step``-th row and column only (the same values as the whole
+        images' ``[::step, ::step]``), for a pose scored but not tested pixel by pixel
     Returns
     -------
-    r_I, r_D : (H, W) float32
+    r_I, r_D : (H, W) float32, or (ceil(H / step), ceil(W / step))
     """
-    mu, mv, z = warp if warp is not None else warp_coordinates(camera, depth_ref, T_cur_ref)
     H, W = depth_ref.shape
+    if step > 1:
+        gray_ref, depth_ref = gray_ref[::step, ::step], depth_ref[::step, ::step]
+    if warp is None:
+        warp = warp_coordinates(camera, depth_ref, T_cur_ref, None if step == 1 else _grid(H, W, step))
+    mu, mv, z = warp
     outside = ~((mu >= 0) & (mu <= W - 1) & (mv >= 0) & (mv <= H - 1))  # NaN (no depth) included
     # the warp is a whole-image map: remap samples image and depth (bilinear, as interpolate;
     # one channel each: a 2-channel remap rounds the position to 1/32 pixel)
@@ -81,6 +88,14 @@ def residuals(
     d -= z  # r_D
     d[no_depth] = np.nan
     return i, d
+
+
+@lru_cache(maxsize=4)
+def _grid(H: int, W: int, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """(columns, rows) of every ``step``-th pixel (read-only)."""
+    v, u = np.mgrid[0:H:step, 0:W:step]
+    u.flags.writeable = v.flags.writeable = False
+    return u, v
 
 
 def current_samples(gray_cur: np.ndarray, depth_cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

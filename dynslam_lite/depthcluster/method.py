@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -110,6 +109,8 @@ class Iteration:
     tau : photometric outlier threshold derived from this pose's residuals
     static_fraction : fraction of valid-depth pixels used
     ok, reason : outcome of the solver
+    score : :func:`median_residual` of this pose (the pose selection, ``select_margin``; NaN
+        when not computed)
     """
 
     T_cur_ref: np.ndarray
@@ -119,6 +120,7 @@ class Iteration:
     static_fraction: float
     ok: bool
     reason: str = ""
+    score: float = float("nan")
 
 
 @dataclass
@@ -163,35 +165,11 @@ def median_residual(r_i: np.ndarray, valid: np.ndarray) -> float:
     """Median |r_I| over the ``valid`` reference pixels of every ``SCORE_STEP``-th row and column
     where the residual is defined (inf where none is): how well a pose explains the reference
     image when most of it is static. ``r_i`` is the whole residual image or its grid
-    (:func:`grid_residual`); ``valid`` the whole image's."""
+    (``residuals(..., step=SCORE_STEP)``); ``valid`` the whole image's."""
     grid = valid[::SCORE_STEP, ::SCORE_STEP]
     a = np.abs(r_i if r_i.shape == grid.shape else r_i[::SCORE_STEP, ::SCORE_STEP])[grid]
     a = a[np.isfinite(a)]
     return float(np.median(a)) if a.size else float("inf")
-
-
-def grid_residual(gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, camera: PinholeCamera,
-                  T_cur_ref: np.ndarray) -> np.ndarray:
-    """The photometric residual of :func:`.background.residuals` on the grid of
-    :func:`median_residual` only (the same values as its ``r_I[::SCORE_STEP, ::SCORE_STEP]``), for
-    a pose whose whole residual image is not needed."""
-    H, W = depth_ref.shape
-    mu, mv, _ = warp_coordinates(camera, depth_ref[::SCORE_STEP, ::SCORE_STEP], T_cur_ref, _grid(H, W))
-    outside = ~((mu >= 0) & (mu <= W - 1) & (mv >= 0) & (mv <= H - 1))
-    mu, mv = np.where(outside, np.float32(-1), mu), np.where(outside, np.float32(-1), mv)
-    r = cv2.remap(gray_cur.astype(np.float32, copy=False), mu, mv, cv2.INTER_LINEAR,
-                  borderMode=cv2.BORDER_REPLICATE)
-    r -= gray_ref[::SCORE_STEP, ::SCORE_STEP]
-    r[outside] = np.nan
-    return r
-
-
-@lru_cache(maxsize=4)
-def _grid(H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
-    """(columns, rows) of the pixels of :func:`grid_residual` (read-only)."""
-    v, u = np.mgrid[0:H:SCORE_STEP, 0:W:SCORE_STEP]
-    u.flags.writeable = v.flags.writeable = False
-    return u, v
 
 
 def estimate_pair(
@@ -260,19 +238,16 @@ def estimate_pair(
     comps = layer_components(clusters_ref) if cfg.outlier.grow else None
     last: tuple = (None,)  # (pose, r_I, r_D, warp) of the latest residual images
     samples = current_samples(gray_cur, depth_cur)  # what the residuals sample, once per pair
-    scored: dict[int, float] = {}  # id of an estimate -> its median_residual
     for k in range(cfg.update_iterations + 1):
         if k == cfg.update_iterations and not record:
             its.append(Iteration(T, removed, None, float("nan"), static_fraction(removed), True))
             break
         with stage(f"update_{k + 1}"):
-            warp = warp_coordinates(camera, depth_ref, T)
-            r_i, r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp, samples)
-            last = (T, r_i, r_d, warp)
-            if cfg.select_margin > 0:
-                scored[id(T)] = median_residual(r_i, valid)
+            last = _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples)
+            _, r_i, r_d, _ = last
+            score = median_residual(r_i, valid) if cfg.select_margin > 0 else float("nan")
             out, tau = outliers(r_i, r_d, depth_ref, valid & ~removed, cfg.outlier, comps)
-        its.append(Iteration(T, removed, r_i if record else None, tau, static_fraction(removed), True))
+        its.append(Iteration(T, removed, r_i if record else None, tau, static_fraction(removed), True, score=score))
         if k == cfg.update_iterations:
             break
         new_removed = ((removed if k else base) | out) if cfg.accumulate else (base | out)
@@ -300,18 +275,19 @@ def estimate_pair(
     chosen = "last estimate"
     if cfg.select_margin > 0:
         with stage("select"):
-            if id(T) not in scored:  # the last update's residuals were not computed
-                last = _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples)
-                scored[id(T)] = median_residual(last[1], valid)
+            def score(T_k: np.ndarray) -> float:
+                r_k = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_k, samples=samples,
+                                step=SCORE_STEP)[0]
+                return median_residual(r_k, valid)
+
+            for it in its:  # its[-1] is the last estimate T
+                if np.isnan(it.score):
+                    it.score = score(it.T_cur_ref)
             T_pred = np.eye(4) if T_init is None else np.asarray(T_init, float)
-            options = [("prediction", T_pred, removed)] + [
-                (f"estimate {k}", it.T_cur_ref, it.removed) for k, it in enumerate(its) if it.T_cur_ref is not T]
-            for name, T_k, removed_k in options:
-                if id(T_k) not in scored:
-                    r_k = grid_residual(gray_ref, depth_ref, gray_cur, camera, T_k)
-                    scored[id(T_k)] = median_residual(r_k, valid)
-            name, T_best, removed_best = min(options, key=lambda o: scored[id(o[1])])
-            if scored[id(T_best)] * (1.0 + cfg.select_margin) < scored[id(T)]:
+            options = [("prediction", T_pred, removed, score(T_pred))] + [
+                (f"estimate {k}", it.T_cur_ref, it.removed, it.score) for k, it in enumerate(its[:-1])]
+            name, T_best, removed_best, best = min(options, key=lambda o: o[3])
+            if best * (1.0 + cfg.select_margin) < its[-1].score:
                 chosen, T, removed = name, T_best, removed_best
     moving = removed
     if cfg.release:
@@ -325,7 +301,7 @@ def estimate_pair(
 
 
 def _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples) -> tuple:
-    """(T, r_I, r_D, warp) of the pose T, as the update loop keeps its latest."""
+    """(T, r_I, r_D, warp): the whole residual images of the pose T and its warp."""
     warp = warp_coordinates(camera, depth_ref, T)
     return (T, *residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp, samples), warp)
 

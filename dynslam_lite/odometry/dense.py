@@ -85,8 +85,10 @@ class DenseResult:
 
 
 def _huber_weights(r: np.ndarray, k: float) -> np.ndarray:
-    a = np.abs(r)
-    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12)).astype(np.float32)
+    """Huber weights min(1, k / |r|) for k > 0, float32 (NaN where r is NaN)."""
+    a = np.abs(r).astype(np.float32, copy=False)
+    np.maximum(a, np.float32(k), out=a)  # |r| <= k gives k / k = 1 exactly
+    return np.divide(np.float32(k), a, out=a)
 
 
 def _geometric_jacobian(g_u, g_v, P, cam: PinholeCamera) -> np.ndarray:
@@ -233,10 +235,10 @@ def align(
                 return DenseResult(T_prev, False, f"only {idx.size} pixels overlap at level {level}",
                                    idx.size, history + [costs])
             s, sd = interpolate(cur.stack, pu[idx], pv[idx])  # (I, I_u, I_v, D), (D_u, D_v, smooth, 0)
-            finite = np.isfinite(s @ ones) & np.isfinite(sd @ ones)  # a non-finite channel makes the sum non-finite
-            if not finite.all():
+            if not (np.isfinite(s.sum()) and np.isfinite(sd.sum())):  # a non-finite sample makes the sum non-finite
+                finite = np.isfinite(s @ ones) & np.isfinite(sd @ ones)
                 idx, s, sd = idx[finite], s[finite], sd[finite]
-            r_I = s[:, 0] - I_ref[idx]
+            r_I = s[:, 0] - np.take(I_ref, idx)
             w_I = _huber_weights(r_I, cfg.huber_intensity)
             di = np.flatnonzero((sd[:, 2] > 0.999) & (s[:, 3] > 0))  # the samples with a depth residual
             Pi = np.take(P, idx, axis=1)
