@@ -49,14 +49,16 @@ def otsu3(hist: np.ndarray) -> tuple[int, int]:
     P = np.concatenate([[0.0], np.cumsum(p)])  # P[T] = mass of [0, T - 1]
     S = np.concatenate([[0.0], np.cumsum(v * p)])  # first moment of [0, T - 1]
     m = S[-1]
-    T0, T1 = np.meshgrid(np.arange(L + 1), np.arange(L + 1), indexing="ij")
-    valid = (T0 >= 1) & (T1 > T0) & (T1 <= L - 1)
-    w = [P[T0], P[T1] - P[T0], 1.0 - P[T1]]
-    s = [S[T0], S[T1] - S[T0], m - S[T1]]
-    var = np.zeros(T0.shape)
-    for wk, sk in zip(w, s):
+    T = np.arange(L + 1)
+
+    def term(wk, sk):  # P_k (m_k - m)^2 of a class of mass wk and first moment sk
         with np.errstate(divide="ignore", invalid="ignore"):
-            var += np.where(wk > 0, (sk - wk * m) ** 2 / np.where(wk > 0, wk, 1.0), 0.0)
+            return np.where(wk > 0, (sk - wk * m) ** 2 / np.where(wk > 0, wk, 1.0), 0.0)
+
+    # the first class depends on T0 only and the last on T1 only: 1-D, the middle one (T0, T1)
+    var = term(P, S)[:, None] + term(P[None, :] - P[:, None], S[None, :] - S[:, None])
+    var += term(1.0 - P, m - S)[None, :]
+    valid = (T[:, None] >= 1) & (T[None, :] > T[:, None]) & (T[None, :] <= L - 1)
     var[~valid] = -np.inf
     t0, t1 = np.unravel_index(int(np.argmax(var)), var.shape)  # first max in (T0, T1) order
     return int(t0), int(t1)
@@ -64,8 +66,13 @@ def otsu3(hist: np.ndarray) -> tuple[int, int]:
 
 def depth_to_gray(depth: np.ndarray, z_max: float) -> np.ndarray:
     """(H, W) metres -> uint8 grey, 0 = no depth, 1..255 over (0, z_max]."""
-    g = np.rint(np.clip(depth / z_max, 0.0, 1.0) * 255.0)
-    return np.where(depth > 0, np.maximum(g, 1), 0).astype(np.uint8)
+    g = depth / z_max  # in place from here: one full-size temporary
+    np.clip(g, 0.0, 1.0, out=g)
+    g *= 255.0
+    np.rint(g, out=g)
+    np.maximum(g, 1, out=g)
+    g[~(depth > 0)] = 0
+    return g.astype(np.uint8)
 
 
 def grow_region(gray: np.ndarray, seed: tuple[int, int], t0: int, t1: int, td: int = 6,
@@ -154,13 +161,14 @@ def fill_depth_hole(depth: np.ndarray, hole: np.ndarray, z_max: float = 8.0, td:
     known = (gray > 0) & ~hole
     if not known.any() or not hole.any():
         return DepthFill(depth.copy(), np.zeros_like(hole), (0, 0))
-    hist = np.bincount(gray[gray > 0], minlength=256)
+    hist = np.bincount(gray.ravel(), minlength=256)
+    hist[0] = 0  # no depth
     t0, t1 = otsu3(hist)
     # work in the hole's box plus a margin: sources farther away are never reached first
-    ys, xs = np.nonzero(hole)
+    rows, cols = np.flatnonzero(hole.any(axis=1)), np.flatnonzero(hole.any(axis=0))
     m = margin_px
-    r0, r1 = max(ys.min() - m, 0), min(ys.max() + m + 1, hole.shape[0])
-    c0, c1 = max(xs.min() - m, 0), min(xs.max() + m + 1, hole.shape[1])
+    r0, r1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, hole.shape[0])
+    c0, c1 = max(cols[0] - m, 0), min(cols[-1] + m + 1, hole.shape[1])
     sub = fill_crop(gray[r0:r1, c0:c1], hole[r0:r1, c0:c1], known[r0:r1, c0:c1], t0, t1, td, max_seeds)
     vals, filled_sub, seeds = sub
     filled = np.zeros_like(hole)
@@ -191,7 +199,7 @@ def fill_crop(gray: np.ndarray, hole: np.ndarray, known: np.ndarray, t0: int, t1
         if np.count_nonzero(todo) != n_todo:  # the centroid of what is left (exact: integer sums)
             n_todo = np.count_nonzero(todo)
             target = np.array([todo.sum(axis=1) @ np.arange(H), todo.sum(axis=0) @ np.arange(W)]) / n_todo
-        i = np.argmin(np.hypot(cand_r - target[0], cand_c - target[1]))
+        i = _nearest(cand_r, cand_c, target)
         seed = (int(cand_r[i]), int(cand_c[i]))
         seeds.append(seed)
         region, (a0, a1, b0, b1) = _flood(gray, seed, td, src)
@@ -215,6 +223,16 @@ def fill_crop(gray: np.ndarray, hole: np.ndarray, known: np.ndarray, t0: int, t1
     return out, hole & ~todo, seeds
 
 
+def _nearest(rows: np.ndarray, cols: np.ndarray, target: np.ndarray) -> int:
+    """Index of the first point (rows, cols) nearest to ``target``, as
+    ``np.argmin(np.hypot(rows - target[0], cols - target[1]))`` gives it: ``hypot`` is taken only
+    where the squared distance is within rounding of the smallest."""
+    dr, dc = rows - target[0], cols - target[1]
+    d2 = dr * dr + dc * dc
+    near = np.flatnonzero(d2 <= d2.min() * (1 + 1e-9) + 1e-300)
+    return int(near[np.argmin(np.hypot(dr[near], dc[near]))])
+
+
 def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
     """Continue the filling layer by layer, in place: the ``todo`` pixels touching ``layer`` take
     the mean of their ``layer`` neighbours and become the next layer.
@@ -233,11 +251,13 @@ def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
     front = np.flatnonzero(np.pad(layer, 1).ravel())
     slots = np.empty((H + 2) * Wp, np.int64)  # scratch: each target pixel's slot in the next front
     while front.size:
-        target = (front[None, :] + shifts[:, None]).ravel()
+        target = front[None, :] + shifts[:, None]  # (8, n): each neighbour of each front pixel
         keep = open_[target]
-        if not keep.any():
+        target = target[keep]
+        if not target.size:
             break
-        target, src = target[keep], np.tile(front, len(shifts))[keep]
+        # the value of the front pixel each entry comes from, without tiling the front
+        src = np.broadcast_to(values[front], keep.shape)[keep].astype(np.float64)
         # np.unique(target, return_inverse=True) without sorting every entry: the one entry of
         # each pixel that the scatter kept marks it, only the distinct pixels are sorted
         entry = np.arange(target.size)
@@ -245,7 +265,7 @@ def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
         front = np.sort(target[slots[target] == entry])
         slots[front] = np.arange(front.size)
         slot = slots[target]
-        total = np.bincount(slot, values[src].astype(np.float64), len(front))  # in the order of the entries
+        total = np.bincount(slot, src, len(front))  # in the order of the entries
         values[front] = (total / np.bincount(slot, None, len(front))).astype(np.float32)
         open_[front] = False
     out[:] = values.reshape(H + 2, Wp)[1:-1, 1:-1]

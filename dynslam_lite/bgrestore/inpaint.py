@@ -182,9 +182,16 @@ def _splat_hole(x, y, values, box, crop):
     lut[1:-1, 1:-1][crop] = np.arange(n)
     lut = lut.ravel()
     base = yl * W2 + xl
-    k = np.concatenate([lut[base], lut[base + 1], lut[base + W2], lut[base + W2 + 1]])
-    wt = np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
-    w4 = wt.reshape(4, -1)  # the four corners' weights of each point
+    # the four corners of each point (top left, top right, bottom left, bottom right): their
+    # bins and weights, corner by corner
+    k = lut[base[None, :] + np.array([[0], [1], [W2], [W2 + 1]])].reshape(-1)
+    gx, gy = 1 - fx, 1 - fy
+    w4 = np.empty((4, fx.size), np.float32)
+    np.multiply(gx, gy, out=w4[0])
+    np.multiply(fx, gy, out=w4[1])
+    np.multiply(gx, fy, out=w4[2])
+    np.multiply(fx, fy, out=w4[3])
+    wt = w4.reshape(-1)
     acc = np.empty((len(values), n))
     for c, channel in enumerate(values):
         acc[c] = np.bincount(k, (w4 * channel).reshape(-1), n + 1)[:n]
@@ -247,9 +254,7 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
             vals[3] = zc[k]
             pts.append((x[k], y[k], pix[k], vals))
             if views is not None:
-                seen = np.zeros(H * W, bool)
-                seen[pix[k]] = True
-                count += seen
+                count[pix[k]] += 1  # once per pixel, however many points land there
                 wanting = (hole & (count.reshape(H, W) < views)).astype(np.uint8)
                 if not wanting.any():
                     break

@@ -155,8 +155,15 @@ class BgRestoreMethod(FrontendMethod):
                     depth, grown = fill.depth, fill.filled
         left = hole & ~restored  # no keyframe saw behind: no keypoints there
         depth = np.where(left & ~grown, 0.0, depth).astype(np.float32)
-        record = (instances, FrameRestoration(removal, restored, grown, rgb, depth), left)
+        # nothing restored: the frontend sees the image the removal extracted its keypoints from
+        # (the depth differs only in the hole, where no keypoint is kept)
+        same = None if restored.any() else feats
+        record = (instances, FrameRestoration(removal, restored, grown, rgb, depth), left, same)
         return replace(frame, rgb=rgb, depth=depth), left | moved, T_trial, record
+
+    def keypoints(self, record):
+        """The removal's keypoints where nothing was restored."""
+        return record[3]
 
     def unmapped(self, record) -> np.ndarray | None:
         """The restored and region-grown pixels, unless ``config.map_restored``."""
@@ -164,7 +171,7 @@ class BgRestoreMethod(FrontendMethod):
         return None if self.config.map_restored else rec.restored | rec.grown
 
     def tracked(self, frame, tf, record) -> Tracked:
-        instances, rec, left = record
+        instances, rec, left, _ = record
         if tf.keyframe:
             n = len(self.tracker.keyframes)
             people = union(instances)

@@ -212,7 +212,7 @@ class FeatureTracker:
     # ------------------------------------------------------------------ per frame
     def process(self, frame, exclude: np.ndarray | None = None, timer=None,
                 T_init: np.ndarray | None = None, refined: bool = False,
-                unmapped: np.ndarray | None = None) -> TrackedFrame:
+                unmapped: np.ndarray | None = None, keypoints: Features | None = None) -> TrackedFrame:
         """Track one frame (a :class:`dynslam_lite.io.Frame`); failures are reported, not raised.
 
         ``exclude``: (H, W) bool, keypoints inside are dropped (semantic masks).
@@ -220,10 +220,15 @@ class FeatureTracker:
         ``refined``: it is already this frame's pose (a trial pose), see :meth:`locate`.
         ``unmapped``: (H, W) bool, keypoints inside are tracked but never become map points
         (pixels that were not measured, e.g. paper C's restoration).
+        ``keypoints``: the frame's keypoints as :func:`extract` gives them without ``exclude``, where
+        the caller extracted them already from this image (with this depth outside ``exclude``).
         """
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("orb"):
-            feats = extract(frame.gray, frame.depth, self.config.orb, exclude)
+            if keypoints is None:
+                feats = extract(frame.gray, frame.depth, self.config.orb, exclude)
+            else:  # what extract does with exclude
+                feats = keypoints if exclude is None else keypoints.subset(~sample_nearest(exclude, keypoints.uv))
         if not self.keyframes:
             self._add_keyframe(frame, np.eye(4), feats, np.zeros(0, int), np.zeros(0, int),
                                np.ones(0), np.zeros(len(feats), bool))

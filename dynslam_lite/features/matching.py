@@ -45,22 +45,31 @@ def search_by_projection(uv_proj: np.ndarray, desc: np.ndarray, feats: Features,
     pt, kp = pt[inside], kp[inside]
     if pt.size == 0:
         return np.zeros(0, int), np.zeros(0, int)
-    rows, row_of = np.unique(pt, return_inverse=True)  # map points with a keypoint in their window
+    # the map points with a keypoint in their window (sorted), and each pair's row among them
+    counts = np.bincount(pt, minlength=len(uv_proj))
+    rows = np.flatnonzero(counts)
+    row_of = (np.cumsum(counts > 0) - 1)[pt]
     window = np.zeros((rows.size, len(feats)), np.uint8)
     window[row_of, kp] = 1
     knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc[rows], feats.desc, k=2, mask=window)
-    q, t, d = [], [], []
-    for i, m in enumerate(knn):
-        if not m or m[0].distance > max_distance:
-            continue
-        if len(m) == 2 and m[0].distance > ratio * m[1].distance:
-            continue
-        q.append(rows[i])
-        t.append(m[0].trainIdx)
-        d.append(m[0].distance)
-    if not q:
+    t, d, d2 = _best_two(knn)
+    # the best within max_distance, and below ratio times the second best where there is one
+    keep = (d <= max_distance) & ~(d > ratio * d2)
+    if not keep.any():
         return np.zeros(0, int), np.zeros(0, int)
-    return _unique_best(np.array(q), np.array(t), np.array(d))
+    return _unique_best(rows[keep], t[keep], d[keep])
+
+
+def _best_two(knn) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per query of a k = 2 ``knnMatch``: (train index of the best, its distance, the second
+    best's distance); inf where a query has no match or no second one."""
+    inf = float("inf")
+    best = [(m[0].trainIdx, m[0].distance, m[1].distance if len(m) == 2 else inf) if m else (-1, inf, inf)
+            for m in knn]
+    if not best:
+        return np.zeros(0, int), np.zeros(0), np.zeros(0)
+    t, d, d2 = zip(*best)
+    return np.array(t), np.array(d), np.array(d2)
 
 
 def match_descriptors(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float = 0.75,

@@ -40,7 +40,7 @@ class FrontendMethod(Method):
             instances = self.masks(frame)
         seen, exclude, T_trial, record = self.prepare(frame, instances, timer)
         tf = self.tracker.process(seen, exclude, timer, T_init=T_trial, refined=T_trial is not None,
-                                  unmapped=self.unmapped(record))
+                                  unmapped=self.unmapped(record), keypoints=self.keypoints(record))
         self.n_frames += 1
         return self.tracked(frame, tf, record)
 
@@ -56,6 +56,11 @@ class FrontendMethod(Method):
     def unmapped(self, record) -> np.ndarray | None:
         """(H, W) bool, pixels of the frame :meth:`prepare` made rather than measured: keypoints there
         are tracked but never become map points. None here."""
+        return None
+
+    def keypoints(self, record):
+        """The keypoints of the frame :meth:`prepare` returned, before the exclusion, where it extracted
+        them from that very image already (the frontend then does not extract them again), or None."""
         return None
 
     def tracked(self, frame, tf: TrackedFrame, record) -> Tracked:
