@@ -84,12 +84,20 @@ def _left_jacobian(w: np.ndarray) -> np.ndarray:
 
 
 def se3_exp(xi: np.ndarray) -> np.ndarray:
-    """SE(3) exponential of a twist ``xi = (v, w)`` (6,) -> (4, 4) pose."""
+    """SE(3) exponential of a twist ``xi = (v, w)`` (6,) -> (4, 4) pose: ``so3_exp(w)`` and
+    ``_left_jacobian(w) @ v``, sharing the angle, ``hat(w)`` and its sine and cosine."""
     xi = np.asarray(xi, dtype=float).reshape(6)
     v, w = xi[:3], xi[3:]
+    theta = np.linalg.norm(w)
+    K = hat(w)
     T = np.eye(4)
-    T[:3, :3] = so3_exp(w)
-    T[:3, 3] = _left_jacobian(w) @ v
+    if theta < 1e-8:  # second-order Taylor expansions
+        T[:3, :3] = np.eye(3) + K + 0.5 * K @ K
+        T[:3, 3] = (np.eye(3) + 0.5 * K + K @ K / 6.0) @ v
+        return T
+    sin, one_cos = np.sin(theta), 1.0 - np.cos(theta)
+    T[:3, :3] = np.eye(3) + sin / theta * K + one_cos / theta**2 * K @ K
+    T[:3, 3] = (np.eye(3) + one_cos / theta**2 * K + (theta - sin) / theta**3 * K @ K) @ v
     return T
 
 

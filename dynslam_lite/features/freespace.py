@@ -53,3 +53,14 @@ def free_space_test(camera: PinholeCamera, T_ref_cur: np.ndarray, uv_cur: np.nda
     near = ref_nearest[vi, ui]
     score[ok] = np.where(np.isfinite(near), np.maximum(near - z_r, 0.0) / z_r, np.nan)
     return score
+
+
+def median_over_references(score: np.ndarray) -> np.ndarray:
+    """(N,) median of each row's non-nan scores of ``score`` (N, R), rows with at least one:
+    ``np.nanmedian(score, axis=1)`` (the mean of the two middle values of an even count, the
+    middle one of an odd count) without its masked-array path, several times faster on the few
+    columns of a reference set."""
+    s = np.sort(score, axis=1)  # nan last
+    n = np.count_nonzero(~np.isnan(score), axis=1)
+    rows = np.arange(len(s))
+    return (s[rows, (n - 1) // 2] + s[rows, n // 2]) / 2

@@ -36,7 +36,7 @@ import numpy as np
 from ..geometry import (PinholeCamera, backproject, invert, normalize_pose, project, sample_nearest,
                         transform_points)
 from ..io import Frame
-from .freespace import free_space_test, nearest_depth
+from .freespace import free_space_test, median_over_references, nearest_depth
 from .matching import match_descriptors, search_by_projection
 from .optimize import Observations, PoseResult, local_bundle_adjustment, optimize_pose, residuals
 from .orb import Features, ORBConfig, extract
@@ -338,7 +338,9 @@ class FeatureTracker:
         """Indices of the ``n`` keyframes (among the latest :attr:`REFERENCE_CANDIDATES`) sharing
         most of the map points ``map_idx``; none that shares no point."""
         first = max(0, len(self.keyframes) - self.REFERENCE_CANDIDATES)
-        shared = [np.isin(kf.point_ids, map_idx).sum() for kf in self.keyframes[first:]]
+        wanted = np.zeros(len(self.map) + 1, bool)  # the last entry: a keypoint without a point (-1)
+        wanted[map_idx] = True
+        shared = [np.count_nonzero(wanted[kf.point_ids]) for kf in self.keyframes[first:]]
         order = np.argsort(-np.asarray(shared), kind="stable")[:n]
         return [first + int(i) for i in order if shared[i] > 0]
 
@@ -357,7 +359,7 @@ class FeatureTracker:
             return out, cand[:0]
         score = self.free_space_scores(refs, T_c_w, feats.uv[cand], feats.z[cand])
         seen = np.isfinite(score).any(axis=1)
-        out[cand[seen]] = np.nanmedian(score[seen], axis=1) >= cfg.screen_threshold
+        out[cand[seen]] = median_over_references(score[seen]) >= cfg.screen_threshold
         return out, cand
 
     def free_space_scores(self, refs: list[int], T_c_w: np.ndarray, uv: np.ndarray, z: np.ndarray) -> np.ndarray:

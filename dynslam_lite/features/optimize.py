@@ -95,16 +95,17 @@ def point_jacobian(camera: PinholeCamera, bf: float, P_c: np.ndarray, stereo: np
 
 
 def pose_jacobian(camera: PinholeCamera, bf: float, P_c: np.ndarray, stereo: np.ndarray,
-                  row_scale: np.ndarray | None = None) -> np.ndarray:
+                  row_scale: np.ndarray | None = None, J_p: np.ndarray | None = None) -> np.ndarray:
     """(N, 3, 6) derivative of the error w.r.t. a left perturbation ``T_c_w <- exp(xi) T_c_w``,
-    ``xi = (rho, phi)``: dP_c = rho + phi x P_c. ``row_scale`` (N,) whitens each observation."""
-    J_p = point_jacobian(camera, bf, P_c, stereo)
+    ``xi = (rho, phi)``: dP_c = rho + phi x P_c. ``row_scale`` (N,) whitens each observation;
+    ``J_p``: :func:`point_jacobian` of the same points, where the caller has it already."""
+    J_p = point_jacobian(camera, bf, P_c, stereo) if J_p is None else J_p
     if row_scale is not None:
         J_p = J_p * row_scale[:, None, None]
-    dP = np.zeros((len(P_c), 3, 6))
-    dP[:, :, :3] = np.eye(3)
-    dP[:, :, 3:] = -hat(P_c)
-    return J_p @ dP
+    J = np.empty((len(P_c), 3, 6))  # J_p @ [I | -hat(P_c)], block by block
+    J[:, :, :3] = J_p
+    J[:, :, 3:] = J_p @ -hat(P_c)
+    return J
 
 
 @dataclass
@@ -213,11 +214,18 @@ def local_bundle_adjustment(camera: PinholeCamera, bf: float, T_c_w: np.ndarray,
     return T, P, chi2_of(T, P)
 
 
-def _sum_blocks(index: np.ndarray, size: int, values: np.ndarray) -> np.ndarray:
-    """(size, *block) sums of the per-observation blocks ``values`` (N, *block) by ``index`` (N,)."""
-    d = int(np.prod(values.shape[1:]))
-    flat = (index[:, None] * d + np.arange(d)).ravel()
-    return np.bincount(flat, values.reshape(-1), size * d).reshape((size,) + values.shape[1:])
+class _BlockSums:
+    """``(size, *block)`` sums of per-observation blocks ``values`` (N, *block) by ``index`` (N,):
+    one ``np.bincount``, its bins computed once (the Levenberg-Marquardt steps sum by the same
+    indices every step)."""
+
+    def __init__(self, index: np.ndarray, size: int, block: tuple[int, ...]):
+        d = int(np.prod(block))
+        self.flat = (index[:, None] * d + np.arange(d)).ravel()
+        self.shape, self.bins = (size,) + tuple(block), size * d
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        return np.bincount(self.flat, values.reshape(-1), self.bins).reshape(self.shape)
 
 
 def _levenberg_marquardt(camera, bf, T, P, slot, kf_of_obs, pt_of_obs, obs, w, steps):
@@ -253,28 +261,33 @@ def _levenberg_marquardt(camera, bf, T, P, slot, kf_of_obs, pt_of_obs, obs, w, s
 
     e, P_c, R, cost = linearise(T, P)
     lam, nu = None, 2.0
+    by_point33, by_point3 = _BlockSums(pt_of_obs, M, (3, 3)), _BlockSums(pt_of_obs, M, (3,))
+    by_pose66, by_pose6 = _BlockSums(s0, K, (6, 6)), _BlockSums(s0, K, (6,))
+    by_pair = _BlockSums(s[pi] * K + s[pj], K * K, (6, 6))
     for _ in range(steps):
-        J_p = point_jacobian(camera, bf, P_c, obs.stereo) @ R  # (N, 3, 3) d e / d P_w
-        J_c = pose_jacobian(camera, bf, P_c, obs.stereo) * has[:, None, None]  # (N, 3, 6) d e / d xi
+        J_point = point_jacobian(camera, bf, P_c, obs.stereo)  # d e / d P_c
+        J_p = J_point @ R  # (N, 3, 3) d e / d P_w
+        J_c = pose_jacobian(camera, bf, P_c, obs.stereo, J_p=J_point) * has[:, None, None]  # (N, 3, 6) d e / d xi
         wJ_p, wJ_c = w[:, None, None] * J_p, w[:, None, None] * J_c
         wJ_pT, wJ_cT = wJ_p.transpose(0, 2, 1), wJ_c.transpose(0, 2, 1)
-        V = _sum_blocks(pt_of_obs, M, wJ_pT @ J_p)
-        U = _sum_blocks(s0, K, wJ_cT @ J_c)
+        V = by_point33(wJ_pT @ J_p)
+        U = by_pose66(wJ_cT @ J_c)
         W = wJ_cT @ J_p  # (N, 6, 3); 0 where the keyframe is fixed
-        g_p = _sum_blocks(pt_of_obs, M, np.einsum("nki,nk->ni", wJ_p, e))
-        g_c = _sum_blocks(s0, K, np.einsum("nki,nk->ni", wJ_c, e))
+        W_pj = W[pj].transpose(0, 2, 1)
+        g_p = by_point3(np.einsum("nki,nk->ni", wJ_p, e))
+        g_c = by_pose6(np.einsum("nki,nk->ni", wJ_c, e))
         if lam is None:
             lam = 1e-3 * max(np.einsum("kii->ki", U).max(), np.einsum("mii->mi", V).max(), 1e-12)
         while True:
             V_inv = np.linalg.inv(V + lam * np.eye(3))
             Y = W @ V_inv[pt_of_obs]  # (N, 6, 3): W_i V_m^-1
-            WVW = _sum_blocks(s[pi] * K + s[pj], K * K, Y[pi] @ W[pj].transpose(0, 2, 1))
+            WVW = by_pair(Y[pi] @ W_pj)
             S = np.zeros((K, 6, K, 6))
             S[np.arange(K), :, np.arange(K), :] = U + lam * np.eye(6)
             S = S.reshape(6 * K, 6 * K) - WVW.reshape(K, K, 6, 6).transpose(0, 2, 1, 3).reshape(6 * K, 6 * K)
-            rhs = -g_c + _sum_blocks(s0, K, np.einsum("nij,nj->ni", Y, g_p[pt_of_obs]))
+            rhs = -g_c + by_pose6(np.einsum("nij,nj->ni", Y, g_p[pt_of_obs]))
             d_c = np.linalg.solve(S, rhs.ravel()).reshape(K, 6)
-            Wd = _sum_blocks(pt_of_obs, M, np.einsum("nij,ni->nj", W, d_c[s0]))
+            Wd = by_point3(np.einsum("nij,ni->nj", W, d_c[s0]))
             d_p = -np.einsum("mij,mj->mi", V_inv, g_p + Wd)
             T_new = T.copy()
             for k in np.flatnonzero(slot >= 0):

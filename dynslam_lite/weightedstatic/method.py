@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..features.freespace import median_over_references
 from ..features.frontend import Estimate, FeatureTracker, FrontendConfig
 from ..features.method import FrontendMethod
 from ..features.optimize import CHI2_STEREO, optimize_pose
@@ -116,7 +117,7 @@ class WeightedStaticTracker(FeatureTracker):
                 delta[~has, r] = self.free_space_scores([k], T_c_w, feats.uv[kp], feats.z[kp])[:, 0]
         out = np.full(len(map_idx), np.nan)  # nan: the point is seen in no reference
         seen = np.isfinite(delta).any(axis=1)
-        out[seen] = np.nanmedian(delta[seen], axis=1)
+        out[seen] = median_over_references(delta[seen])
         return out
 
     def estimate(self, frame, feats, map_idx, kp_idx, T_init) -> Estimate:
