@@ -252,3 +252,15 @@ def test_restored_and_grown_pixels_make_no_map_points_unless_asked():
     record = ([], FrameRestoration(None, restored, grown, None, None), None)
     assert np.array_equal(BgRestoreMethod(cam, BgRestoreConfig()).unmapped(record), restored | grown)
     assert BgRestoreMethod(cam, BgRestoreConfig(map_restored=True)).unmapped(record) is None
+
+
+def test_the_next_seed_is_the_first_nearest_candidate_as_hypot_gives_it():
+    from dynslam_lite.bgrestore.depthfill import _nearest
+
+    rng = np.random.default_rng(5)
+    for _ in range(500):
+        n = int(rng.integers(1, 400))
+        rows, cols = rng.integers(0, 60, n), rng.integers(0, 60, n)  # many exact ties
+        target = rng.integers(0, 60, 2) + rng.choice([0.0, 0.5, 0.25, 1 / 3], 2)
+        assert _nearest(rows, cols, target) == int(np.argmin(np.hypot(rows - target[0], cols - target[1])))
+

@@ -249,3 +249,31 @@ def test_keypoints_in_unmapped_pixels_are_tracked_but_make_no_map_points(scene):
     assert (new_points(ours, n0[1]) & ~in_left).sum() >= (new_points(plain, n0[0]) & ~in_left).sum() > 20
     # matched keypoints in the left half still observe the first keyframe's points
     assert ((ours.point_ids >= 0) & (ours.point_ids < n0[1]) & in_left).sum() > 50
+
+
+def test_keypoints_handed_to_the_frontend_give_the_run_of_its_own_extraction(scene):
+    """``process(keypoints=...)`` (bgrestore hands over the removal's keypoints where nothing was
+    restored) tracks exactly as the frontend's own extraction of the same image, masks included."""
+    seq = open_sequence(scene("walking_xyz", 150), count=12)
+    own, handed = FeatureTracker(seq.camera), FeatureTracker(seq.camera)
+    for i in range(len(seq)):
+        f = seq[i]
+        exclude = f.mask if i % 2 else None  # with and without an exclusion
+        a = own.process(f, exclude)
+        b = handed.process(f, exclude, keypoints=extract(f.gray, f.depth, handed.config.orb))
+        assert np.array_equal(a.feats.uv, b.feats.uv) and a.keyframe == b.keyframe
+    assert np.array_equal(own.trajectory(), handed.trajectory())
+
+
+def test_median_over_references_is_numpys_nanmedian():
+    from dynslam_lite.features.freespace import median_over_references
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        score = np.abs(rng.standard_normal((rng.integers(1, 60), rng.integers(1, 7))))
+        score[rng.random(score.shape) < 0.4] = np.nan
+        if rng.random() < 0.3:
+            score = np.round(score, 1)  # ties, zeros
+        score = score[np.isfinite(score).any(axis=1)]
+        if len(score):
+            assert np.array_equal(median_over_references(score), np.nanmedian(score, axis=1))
