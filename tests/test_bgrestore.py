@@ -263,4 +263,3 @@ def test_the_next_seed_is_the_first_nearest_candidate_as_hypot_gives_it():
         rows, cols = rng.integers(0, 60, n), rng.integers(0, 60, n)  # many exact ties
         target = rng.integers(0, 60, 2) + rng.choice([0.0, 0.5, 0.25, 1 / 3], 2)
         assert _nearest(rows, cols, target) == int(np.argmin(np.hypot(rows - target[0], cols - target[1])))
-
