@@ -41,14 +41,22 @@ def hat(w: np.ndarray) -> np.ndarray:
     return H
 
 
-def so3_exp(w: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula: rotation vector (3,) radians -> rotation matrix (3, 3)."""
+def _so3_exp_and_jacobian(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``exp(hat(w))`` and left Jacobian V of SO(3) for a rotation vector (3,), sharing
+    the angle, ``hat(w)`` and its sine and cosine (second-order Taylor expansions near 0)."""
     w = np.asarray(w, dtype=float)
     theta = np.linalg.norm(w)
     K = hat(w)
-    if theta < 1e-8:  # second-order Taylor expansion
-        return np.eye(3) + K + 0.5 * K @ K
-    return np.eye(3) + np.sin(theta) / theta * K + (1.0 - np.cos(theta)) / theta**2 * K @ K
+    if theta < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K, np.eye(3) + 0.5 * K + K @ K / 6.0
+    sin, one_cos = np.sin(theta), 1.0 - np.cos(theta)
+    return (np.eye(3) + sin / theta * K + one_cos / theta**2 * K @ K,
+            np.eye(3) + one_cos / theta**2 * K + (theta - sin) / theta**3 * K @ K)
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: rotation vector (3,) radians -> rotation matrix (3, 3)."""
+    return _so3_exp_and_jacobian(w)[0]
 
 
 def so3_log(R: np.ndarray) -> np.ndarray:
@@ -72,32 +80,16 @@ def so3_log(R: np.ndarray) -> np.ndarray:
 
 def _left_jacobian(w: np.ndarray) -> np.ndarray:
     """Left Jacobian V of SO(3), so that the SE(3) translation is ``V @ v``."""
-    theta = np.linalg.norm(w)
-    K = hat(w)
-    if theta < 1e-8:
-        return np.eye(3) + 0.5 * K + K @ K / 6.0
-    return (
-        np.eye(3)
-        + (1.0 - np.cos(theta)) / theta**2 * K
-        + (theta - np.sin(theta)) / theta**3 * K @ K
-    )
+    return _so3_exp_and_jacobian(w)[1]
 
 
 def se3_exp(xi: np.ndarray) -> np.ndarray:
-    """SE(3) exponential of a twist ``xi = (v, w)`` (6,) -> (4, 4) pose: ``so3_exp(w)`` and
-    ``_left_jacobian(w) @ v``, sharing the angle, ``hat(w)`` and its sine and cosine."""
+    """SE(3) exponential of a twist ``xi = (v, w)`` (6,) -> (4, 4) pose ``[exp(w) | V(w) v]``."""
     xi = np.asarray(xi, dtype=float).reshape(6)
-    v, w = xi[:3], xi[3:]
-    theta = np.linalg.norm(w)
-    K = hat(w)
     T = np.eye(4)
-    if theta < 1e-8:  # second-order Taylor expansions
-        T[:3, :3] = np.eye(3) + K + 0.5 * K @ K
-        T[:3, 3] = (np.eye(3) + 0.5 * K + K @ K / 6.0) @ v
-        return T
-    sin, one_cos = np.sin(theta), 1.0 - np.cos(theta)
-    T[:3, :3] = np.eye(3) + sin / theta * K + one_cos / theta**2 * K @ K
-    T[:3, 3] = (np.eye(3) + one_cos / theta**2 * K + (theta - sin) / theta**3 * K @ K) @ v
+    R, V = _so3_exp_and_jacobian(xi[3:])
+    T[:3, :3] = R
+    T[:3, 3] = V @ xi[:3]
     return T
 
 

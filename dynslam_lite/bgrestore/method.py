@@ -25,12 +25,13 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
-from ..features import FrontendConfig, extract
+from ..features import Features, FrontendConfig, extract
 from ..features.method import FrontendMethod
-from ..geometry import invert, sample_nearest
+from ..geometry import invert
 from ..imageops import dilate, union
 from ..tracking import Labels, Tracked
 from .depthfill import fill_depth_hole
@@ -100,6 +101,17 @@ class FrameRestoration:
     depth: np.ndarray
 
 
+class _Prepared(NamedTuple):
+    """What :meth:`BgRestoreMethod.prepare` hands on to the frontend and to ``tracked``: the
+    frame's instances, its restoration, the hole pixels left unrestored, and the removal's
+    keypoints when the frontend sees the very image they came from (nothing restored), else None."""
+
+    instances: list
+    restoration: FrameRestoration
+    left: np.ndarray
+    keypoints: Features | None
+
+
 class BgRestoreMethod(FrontendMethod):
     """Method ``bgrestore``. Each frame's detail is its :class:`FrameRestoration`, its labels the
     removed region ('removed'), the matches outside every instance judged dynamic ('moved') and a
@@ -139,7 +151,7 @@ class BgRestoreMethod(FrontendMethod):
         T_trial = None
         if cfg.restore and hole.any() and self.tracker.keyframes:
             # a trial pose from the keypoints outside the hole places the keyframes' pixels
-            static = feats.subset(~sample_nearest(hole | moved, feats.uv))
+            static = feats.outside(hole | moved)
             T_pred = self.tracker.predict()
             _, _, est, _, reason = self.tracker.locate(frame, static, T_pred, timer, count=False)
             T_trial = est.T_c_w if est is not None and not reason else None  # None: the trial failed
@@ -157,21 +169,21 @@ class BgRestoreMethod(FrontendMethod):
         depth = np.where(left & ~grown, 0.0, depth).astype(np.float32)
         # nothing restored: the frontend sees the image the removal extracted its keypoints from
         # (the depth differs only in the hole, where no keypoint is kept)
-        same = None if restored.any() else feats
-        record = (instances, FrameRestoration(removal, restored, grown, rgb, depth), left, same)
+        record = _Prepared(instances, FrameRestoration(removal, restored, grown, rgb, depth), left,
+                           None if restored.any() else feats)
         return replace(frame, rgb=rgb, depth=depth), left | moved, T_trial, record
 
-    def keypoints(self, record):
+    def keypoints(self, record: _Prepared):
         """The removal's keypoints where nothing was restored."""
-        return record[3]
+        return record.keypoints
 
-    def unmapped(self, record) -> np.ndarray | None:
+    def unmapped(self, record: _Prepared) -> np.ndarray | None:
         """The restored and region-grown pixels, unless ``config.map_restored``."""
-        rec = record[1]
+        rec = record.restoration
         return None if self.config.map_restored else rec.restored | rec.grown
 
-    def tracked(self, frame, tf, record) -> Tracked:
-        instances, rec, left, _ = record
+    def tracked(self, frame, tf, record: _Prepared) -> Tracked:
+        instances, rec, left = record.instances, record.restoration, record.left
         if tf.keyframe:
             n = len(self.tracker.keyframes)
             people = union(instances)

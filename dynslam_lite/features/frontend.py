@@ -226,9 +226,8 @@ class FeatureTracker:
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("orb"):
             if keypoints is None:
-                feats = extract(frame.gray, frame.depth, self.config.orb, exclude)
-            else:  # what extract does with exclude
-                feats = keypoints if exclude is None else keypoints.subset(~sample_nearest(exclude, keypoints.uv))
+                keypoints = extract(frame.gray, frame.depth, self.config.orb)
+            feats = keypoints.outside(exclude)
         if not self.keyframes:
             self._add_keyframe(frame, np.eye(4), feats, np.zeros(0, int), np.zeros(0, int),
                                np.ones(0), np.zeros(len(feats), bool))

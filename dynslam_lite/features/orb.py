@@ -64,6 +64,10 @@ class Features:
         return Features(self.uv[keep], self.octave[keep], self.desc[keep], self.z[keep],
                         self.response[keep])
 
+    def outside(self, mask: np.ndarray | None) -> "Features":
+        """The keypoints not on ``mask`` ((H, W) bool, e.g. a semantic mask); all when None."""
+        return self if mask is None else self.subset(~sample_nearest(mask, self.uv))
+
     def inv_sigma2(self, scale_factor: float) -> np.ndarray:
         """(N,) information of a keypoint: 1 / (scale_factor ** octave) ** 2 (ORB-SLAM2)."""
         return scale_factor ** (-2.0 * self.octave)
@@ -114,7 +118,4 @@ def extract(gray: np.ndarray, depth: np.ndarray, config: ORBConfig | None = None
     uv, response, octave, desc = uv[keep], response[keep], octave[keep], desc[keep]
     z = sample_nearest(depth, uv).astype(float)
     z[(z < cfg.min_depth_m) | (z > cfg.max_depth_m)] = 0.0
-    f = Features(uv, octave, desc, z, response)
-    if exclude is not None:
-        f = f.subset(~sample_nearest(exclude, uv))
-    return f
+    return Features(uv, octave, desc, z, response).outside(exclude)
