@@ -245,11 +245,11 @@ def test_new_keypoints_on_a_carried_board_are_kept_out_of_bgrestores_map(scene):
 def test_restored_and_grown_pixels_make_no_map_points_unless_asked():
     """What bgrestore hands the frontend as ``unmapped`` (tested there): rendered, not measured pixels."""
     from dynslam_lite.bgrestore import BgRestoreConfig, BgRestoreMethod
-    from dynslam_lite.bgrestore.method import FrameRestoration
+    from dynslam_lite.bgrestore.method import FrameRestoration, _Prepared
     cam = PinholeCamera(525.0, 525.0, 319.5, 239.5, 640, 480)
     restored, grown = np.zeros((480, 640), bool), np.zeros((480, 640), bool)
     restored[10:20, 30:40], grown[50:60, 30:40] = True, True
-    record = ([], FrameRestoration(None, restored, grown, None, None), None)
+    record = _Prepared([], FrameRestoration(None, restored, grown, None, None), restored & False, None)
     assert np.array_equal(BgRestoreMethod(cam, BgRestoreConfig()).unmapped(record), restored | grown)
     assert BgRestoreMethod(cam, BgRestoreConfig(map_restored=True)).unmapped(record) is None
 
