@@ -66,7 +66,9 @@ class BgRestoreConfig:
         tracking as if it were a measurement and takes the keypoint budget from the measured
         pixels. Measured on the Bonn dev clip taken every 3rd frame (40 frames, 10 Hz, up to 70 %
         of the image removed): ATE 0.309 m with them (a 53 cm jump in one frame pair whose trial
-        had 22 inliers), 0.019 m without; the reports run both
+        had 22 inliers), 0.019 m without; the reports run both. Mapping them only after a trial
+        with at least 50 (100) inliers: Bonn dev 0.0181 m (0.0181) every frame, 0.257 (0.602)
+        every 3rd frame: the trial's support does not tell a good restoration (2026-12-04)
     depth_z_max : metres mapped to grey 255 for the region growing (8-bit depth, Td = 6)
     region_td : the growth step threshold Td on the 8-bit scale (6)
     """
