@@ -74,16 +74,26 @@ BGRESTORE = _run("bgrestore", "bgrestore", SEMANTIC, "paper C with oracle (synth
 # (the release of explained pixels changes the reported mask only: its columns show it, no run needed)
 _NO_PRIOR, _NO_GROW, _NO_CUT = ("propagate", False), ("outlier.grow", False), ("preremoval.max_region_fraction", 1.0)
 _NO_RELEASE, _NO_SELECT = ("release", False), ("select_margin", 0.0)
+_NO_BRIGHTNESS = ("dense.affine_brightness", False)
 DC_PAPER = Run("depthcluster[paper]", "depthcluster", "none",
-               (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE), "paper A only: every addition of ours off")
-DC_PRIOR = Run("depthcluster[paper+prior]", "depthcluster", "none", (_NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE),
+               (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
+               "paper A only: every addition of ours off")
+DC_PRIOR = Run("depthcluster[paper+prior]", "depthcluster", "none",
+               (_NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
                "+ the previous pair's moving mask as a prior of the first estimate (propagate)")
-DC_GROW = Run("depthcluster[paper+grow]", "depthcluster", "none", (_NO_PRIOR, _NO_CUT, _NO_SELECT, _NO_RELEASE),
+DC_GROW = Run("depthcluster[paper+grow]", "depthcluster", "none",
+              (_NO_PRIOR, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
               "+ whole depth-layer regions taken in the background update (outlier.grow)")
-DC_CUT = Run("depthcluster[paper+cut]", "depthcluster", "none", (_NO_PRIOR, _NO_GROW, _NO_SELECT, _NO_RELEASE),
+DC_CUT = Run("depthcluster[paper+cut]", "depthcluster", "none",
+             (_NO_PRIOR, _NO_GROW, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
              "+ pre-removal regions over 25 % of the image cut to the dynamic blocks (max_region_fraction)")
+DC_BRIGHTNESS = Run("depthcluster[paper+brightness]", "depthcluster", "none",
+                    (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE),
+                    "+ a gain and bias of the image brightness estimated with the pose (dense.affine_brightness)")
 DC_NO_SELECT = Run("depthcluster[no-select]", "depthcluster", "none", (_NO_SELECT,),
                    "the default without the pose selection: always the last estimate (select_margin = 0)")
+DC_NO_BRIGHTNESS = Run("depthcluster[no-brightness]", "depthcluster", "none", (_NO_BRIGHTNESS,),
+                       "the default without the brightness model: eq. 5's photometric term as printed")
 
 # paper B's ablation: masks alone, then the geometric test and the weights on degraded masks
 STATIC_ORB_ORACLE = _run("static-orb[oracle]", "static-orb", "oracle", "masks only, oracle")
@@ -198,19 +208,23 @@ OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FI
 # the same where the mask source misses the near people for a while (the crowd)
 MISSED_ROWS = (STATIC_ORB_MISSED, STATIC_ORB_MISSED_SCREEN, WS_MISSED_NO_SCREEN, WS_MISSED, BG_MISSED_NO_SCREEN,
                BG_MISSED)
-# the methods of the summary figure; at lower frame rates depthcluster without its pose selection too
+# paper A's ablation runs (the default is run anyway)
+DC_ABLATION = (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_BRIGHTNESS, DC_NO_SELECT, DC_NO_BRIGHTNESS)
+# the methods of the summary figure; at lower frame rates depthcluster without its pose selection
+# and without its brightness model too
 MAIN = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DEPTHCLUSTER, WEIGHTEDSTATIC, BGRESTORE)
-FRAME_RATE_ROWS = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DC_NO_SELECT, DEPTHCLUSTER, WEIGHTEDSTATIC, BGRESTORE)
+FRAME_RATE_ROWS = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DC_NO_SELECT, DC_NO_BRIGHTNESS, DEPTHCLUSTER,
+                   WEIGHTEDSTATIC, BGRESTORE)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
     RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),
            scenes=TUM_SCENES),
     RunSet("OpenCV's FAST variant", (OPENCV_FAST,), scenes=("static_xyz", "walking_xyz")),
-    RunSet("paper A ablation", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_NO_SELECT), scenes=WALKING),
+    RunSet("paper A ablation", DC_ABLATION, scenes=WALKING),
     # paper A where people crowd (one close to the camera) and carry or push things: class-agnostic
     # removal with the truth to score it, against its baselines
     RunSet("paper A on the object scenes", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER), scenes=OBJECT_SCENES),
-    RunSet("paper A ablation where people crowd", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_NO_SELECT),
+    RunSet("paper A ablation where people crowd", DC_ABLATION,
            scenes=("crowd",)),
     RunSet("paper B ablation", (STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, WS_DEGRADED_GEOMETRY, WS_DEGRADED_WEIGHTS,
                                 WS_DEGRADED, WS_NONE), scenes=("walking_xyz", "walking_rpy")),
@@ -225,7 +239,7 @@ RUN_SETS = (
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
                          STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT, WS_EQ4, BG_INSTANCES, WS_NO_DILATE,
                          WS_NO_SCREEN, BG_NO_SCREEN, BG_NO_RESTORE, BG_MAP_RESTORED), real=True),
-    RunSet("paper A ablation on real data", (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_NO_SELECT), real=True),
+    RunSet("paper A ablation on real data", DC_ABLATION, real=True),
     RunSet("sensitivity on real data", SENSITIVITY, real=True),
     # the real clips at a lower frame rate: larger motion between frames, the hard moments of
     # longer clips (fast turns, motion blur) in a short one
@@ -234,7 +248,7 @@ RUN_SETS = (
 )
 
 # rows of paper A's ablation table, in order (the default last: every addition on)
-PAPER_A_ABLATION = (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_NO_SELECT, DEPTHCLUSTER)
+PAPER_A_ABLATION = (*DC_ABLATION, DEPTHCLUSTER)
 # rows of paper B's ablation table, in order
 PAPER_B_ABLATION = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_DEGRADED, STATIC_ORB_PERSON, WS_DEGRADED_GEOMETRY,
                     WS_DEGRADED_WEIGHTS, WS_DEGRADED, WEIGHTEDSTATIC, WS_NONE)

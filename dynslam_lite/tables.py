@@ -217,8 +217,12 @@ def paper_a_ablation(results: list[RunRecord]) -> Table:
              "(the previous pair's mask carried into this pair's first estimate), 'grow' (a "
              "depth-layer region mostly made of outliers is taken whole), 'cut' (a pre-removal region "
              "larger than 25 % of the image, a floor or wall sharing the person's layer, is cut to "
-             "the dynamic blocks and their neighbours); the default has these three, the pose selection "
-             "and the release. 'no-select' is the default reporting always the last estimate of a pair; "
+             "the dynamic blocks and their neighbours), 'brightness' (a gain and bias of the image "
+             "brightness estimated with the pose, and the residuals of the update read under them: a "
+             "camera with automatic exposure brightens or darkens the whole image between frames); the "
+             "default has these four, the pose selection and the release. 'no-brightness' is the "
+             "default with eq. 5's photometric term as printed. "
+             "'no-select' is the default reporting always the last estimate of a pair; "
              "the default reports the prediction or an earlier estimate instead when its median absolute "
              "photometric residual over the reference pixels is more than 25 % lower (DepthClusterConfig."
              "select_margin: a pose that followed the people leaves most of the static room misaligned). "
@@ -644,7 +648,8 @@ def real_frame_rate(results: list[RunRecord]) -> Table:
              "grows as in the fast turns of a longer recording, and a person crosses more of the image "
              "between two frames. 'frames' and 'failed frames' per column, in the same order. Masks as in "
              "the other real rows (the person model for weightedstatic and bgrestore); "
-             f"'{E.DC_NO_SELECT.label}' is depthcluster without its pose selection. One run per cell: "
+             f"'{E.DC_NO_SELECT.label}' is depthcluster without its pose selection, "
+             f"'{E.DC_NO_BRIGHTNESS.label}' without its brightness model. One run per cell: "
              "the sensitivity table says how far a single run moves. Real clips only with `--data`.")
     return header, rows, notes
 

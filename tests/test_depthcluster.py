@@ -148,6 +148,27 @@ def test_pair_recovers_known_pose_with_a_walking_person(s):
     assert MaskScores.of(res.moving, dyn0).recall > 0.8
 
 
+def test_pair_with_an_exposure_change_keeps_the_static_room_with_the_brightness_model():
+    """The current frame brightened as an automatic exposure does (gain 1.06, bias +0.03) while a
+    person walks: with the brightness model (the default) the pose error is at most half and the
+    final mask's precision 0.1 higher than with eq. 5 as printed, at the same recall."""
+    r = SceneRenderer("walking_xyz", 0)
+    s = 0.8
+    T_w_ref = r.pose(s)
+    T_cur_ref = se3_exp([0.01, -0.005, 0.01, 0.004, -0.006, 0.002])
+    g0, d0, dyn0 = render_clean(r, T_w_ref, s)
+    g1, d1, _ = render_clean(r, T_w_ref @ invert(T_cur_ref), s + 1 / 30)
+    g1 = np.clip(1.06 * g1 + 0.03, 0, 1).astype(np.float32)
+    assert DepthClusterConfig().dense.affine_brightness
+    res = {affine: estimate_pair(g0, d0, g1, d1, r.camera, config=DepthClusterConfig(
+        dense=DenseConfig(finest_level=0, affine_brightness=affine))) for affine in (False, True)}
+    err = {k: np.linalg.norm((invert(T_cur_ref) @ v.T_cur_ref)[:3, 3]) for k, v in res.items()}
+    assert err[True] < 2e-3 and err[False] > 1.5 * err[True], err
+    on, off = (MaskScores.of(res[k].moving, dyn0) for k in (True, False))
+    assert on.precision > off.precision + 0.1 and on.recall > 0.95, (on, off)
+    assert res[True].iterations[-1].brightness[0] > 1.03 and res[False].iterations[-1].brightness is None
+
+
 def test_depthcluster_beats_static_dense_on_walking_clip(scene):
     seq = open_sequence(scene("walking_xyz", 150), start=0, count=30)
     dc = run_method("depthcluster", seq)

@@ -42,8 +42,8 @@ def _run(args):
 
 def test_the_plan_and_an_eta_are_printed(local):
     _, out, _ = local
-    assert "[plan] 70 runs, 742 frames to track; about" in out
-    assert "[run 70/70]" in out and ", ETA " in out
+    assert "[plan] 76 runs, 800 frames to track; about" in out
+    assert "[run 76/76]" in out and ", ETA " in out
 
 
 def test_a_tum_named_sequence_fills_the_papers_own_rows(local):
@@ -83,8 +83,8 @@ def test_reproduce_on_a_local_dask_cluster_gives_the_local_tables(local):
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         # --fresh: every run goes to the cluster's workers, none is taken from the run cache
         out = _run(args + ["--fresh", "--scheduler", cluster.scheduler_address, "--reports", str(root / "dask")])
-    assert f"70 to run on 2 worker(s) of the Dask cluster at {cluster.scheduler_address}" in out
-    assert "[run 70/70]" in out and "[cached" not in out
+    assert f"76 to run on 2 worker(s) of the Dask cluster at {cluster.scheduler_address}" in out
+    assert "[run 76/76]" in out and "[cached" not in out
     assert _tables(root / "dask") == _tables(root / "local")
 
 

@@ -17,7 +17,7 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 FIGURES = {
     "10_depthcluster_clustering_and_masks": ["A_fig2_depth_clustering.png", "A_blocks.png",
                                              "A_fig7_removal_synthetic.png"],
-    "11_depthcluster_iterations": ["A_fig6_iterations.png", "A_fig6_convergence.png",
+    "11_depthcluster_iterations": ["A_fig6_iterations.png", "A_fig6_convergence.png", "A_brightness.png",
                                    "A_fig8_ate.png", "A_fig9_map.png"],
     "20_weightedstatic_masks_and_geometry": ["B_fig7_semantic_static_points.png",
                                              "B_fig4_epipolar_line_motion.png",

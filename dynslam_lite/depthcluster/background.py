@@ -53,7 +53,7 @@ class OutlierConfig:
 def residuals(
     gray_ref: np.ndarray, depth_ref: np.ndarray, gray_cur: np.ndarray, depth_cur: np.ndarray,
     camera: PinholeCamera, T_cur_ref: np.ndarray, warp: tuple | None = None,
-    samples: np.ndarray | None = None, step: int = 1,
+    samples: np.ndarray | None = None, step: int = 1, brightness: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Photometric and depth residual images on the reference pixels (NaN where undefined).
 
@@ -65,6 +65,8 @@ def residuals(
     samples : ``current_samples(gray_cur, depth_cur)`` when the caller has it
     step : residuals of every ``step``-th row and column only (the same values as the whole
         images' ``[::step, ::step]``), for a pose scored but not tested pixel by pixel
+    brightness : (gain a, bias b) of the pair (:class:`~dynslam_lite.odometry.dense.DenseResult`):
+        ``r_I = I_B(w) - (a I_A + b)``; None = ``I_B(w) - I_A`` (eq. 5 as printed)
     Returns
     -------
     r_I, r_D : (H, W) float32, or (ceil(H / step), ceil(W / step))
@@ -82,7 +84,10 @@ def residuals(
         samples = current_samples(gray_cur, depth_cur)
     mu, mv = np.where(outside, np.float32(-1), mu), np.where(outside, np.float32(-1), mv)
     i, d = (cv2.remap(c, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) for c in samples)
-    i -= gray_ref  # in place: r_I
+    if brightness is None:
+        i -= gray_ref  # in place: r_I
+    else:
+        i -= np.float32(brightness[0]) * gray_ref + np.float32(brightness[1])
     i[outside] = np.nan
     no_depth = outside | (d <= 0)
     d -= z  # r_D

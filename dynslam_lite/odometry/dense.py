@@ -8,7 +8,12 @@ For a reference frame A and a current frame B, find ``T = T_B_A`` minimising
     w(x, T) = pi(T pi^-1(x, D_A(x)))
 
 (paper A, eq. 5; identity covariance, rho = Huber as in robust DVO-style odometry). Updates
-are left-multiplied: ``T <- exp(delta) T``. The sum runs over the valid pixels of A, optionally
+are left-multiplied: ``T <- exp(delta) T``.
+
+With ``affine_brightness`` (off by default: eq. 5 as printed) the photometric residual is
+``r_I(x) = I_B(w(x, T)) - (a I_A(x) + b)``, the gain a and bias b of the pair estimated with the
+pose (two more unknowns of the same Gauss-Newton step, as DSO's affine brightness model): a camera
+with automatic exposure changes the brightness of the whole image between frames. The sum runs over the valid pixels of A, optionally
 restricted by a mask of static pixels: paper A's method reuses this solver with its masks.
 
 Intensities are in [0, 1]; depth in metres.
@@ -55,6 +60,12 @@ class DenseConfig:
         pixel; 0 uses every pixel with valid depth (the depth residual works on flat texture too)
     min_valid_fraction : fewer valid residuals than this fraction of the pixels = failure
     step_tolerance : stop a level when the update norm falls below this
+    affine_brightness : estimate a gain and bias of the reference intensities with the pose (see
+        the module docstring); False = eq. 5 as printed. Measured on the Bonn dev clip with the
+        true poses: at an exposure change the median photometric residual of the static room
+        reaches 0.074 (19 grey levels; gain 1.06, bias +0.03), and an affine fit of each pair
+        leaves a residual spread (1.4826 MAD) of 0.010-0.013 instead of 0.021-0.031; on TUM
+        fr2/desk the median stays below 0.003, on the synthetic scenes below 0.0001
     """
 
     levels: int = 4
@@ -68,6 +79,7 @@ class DenseConfig:
     min_gradient: float = 0.0
     min_valid_fraction: float = 0.02
     step_tolerance: float = 1e-6
+    affine_brightness: bool = False
 
 
 @dataclass
@@ -81,6 +93,8 @@ class DenseResult:
     reason : why it failed ('' when ok)
     valid_pixels : residuals used at the finest level
     cost_history : per level (coarsest first), the cost after each accepted iteration
+    brightness : (gain a, bias b) of the reference intensities ((1, 0) without
+        ``affine_brightness``)
     """
 
     T_cur_ref: np.ndarray
@@ -88,6 +102,7 @@ class DenseResult:
     reason: str = ""
     valid_pixels: int = 0
     cost_history: list[list[float]] = field(default_factory=list)
+    brightness: tuple[float, float] = (1.0, 0.0)
 
 
 def _huber_weights(r: np.ndarray, k: float) -> np.ndarray:
@@ -165,6 +180,7 @@ def align(
     mask_ref: np.ndarray | None = None,
     config: DenseConfig | None = None,
     shared: dict | None = None,
+    brightness: tuple[float, float] | None = None,
 ) -> DenseResult:
     """Estimate ``T_cur_ref`` by coarse-to-fine Gauss-Newton on eq. 5.
 
@@ -179,6 +195,7 @@ def align(
         gradients are built once, by the first call. A caller that tracks frame by frame may put
         the reference frame's ``(image, depth)`` pyramids in it as ``"ref_pyramids"`` (the
         previous pair's current frame, ``shared["pyramids"][2:]``)
+    brightness : initial (gain, bias) with ``config.affine_brightness`` ((1, 0) when None)
     Returns
     -------
     DenseResult
@@ -193,6 +210,8 @@ def align(
         check_pose("T_init", T_init)
     cfg = config or DenseConfig()
     T = np.eye(4) if T_init is None else np.asarray(T_init, float).copy()
+    affine = cfg.affine_brightness
+    ab = np.array((1.0, 0.0) if brightness is None else brightness, float)  # gain, bias
     shared = {} if shared is None else shared
     if shared.get("levels", 0) < cfg.levels:
         ref = shared.get("ref_pyramids")
@@ -228,7 +247,7 @@ def align(
         costs: list[float] = []
         min_valid = max(50, int(cfg.min_valid_fraction * z.size))
         prev_cost = np.inf
-        T_prev = T.copy()
+        T_prev, ab_prev = T.copy(), ab.copy()
         for _ in range(iters[level] if level < len(iters) else iters[-1]):
             P = T[:3, :3].astype(np.float32) @ P_ref + T[:3, 3:4].astype(np.float32)
             front = P[2] > 1e-3
@@ -239,12 +258,15 @@ def align(
             idx = np.flatnonzero(inside)
             if idx.size < min_valid:
                 return DenseResult(T_prev, False, f"only {idx.size} pixels overlap at level {level}",
-                                   idx.size, history + [costs])
+                                   idx.size, history + [costs], tuple(ab_prev))
             s, sd = interpolate(cur.stack, pu[idx], pv[idx])  # (I, I_u, I_v, D), (D_u, D_v, smooth, 0)
             if not (np.isfinite(s.sum()) and np.isfinite(sd.sum())):  # a non-finite sample makes the sum non-finite
                 finite = np.isfinite(s @ ones) & np.isfinite(sd @ ones)
                 idx, s, sd = idx[finite], s[finite], sd[finite]
-            r_I = s[:, 0] - np.take(I_ref, idx)
+            I_a = np.take(I_ref, idx)
+            if affine:  # the reference intensities under the pair's gain and bias
+                I_a = np.float32(ab[0]) * I_a + np.float32(ab[1])
+            r_I = s[:, 0] - I_a
             w_I = _huber_weights(r_I, cfg.huber_intensity)
             di = np.flatnonzero((sd[:, 2] > 0.999) & (s[:, 3] > 0))  # the samples with a depth residual
             Pi = np.take(P, idx, axis=1)
@@ -253,9 +275,9 @@ def align(
             w_D = _huber_weights(r_D, cfg.huber_depth_m) * np.float32(cfg.lambda_depth)
             cost = float(np.sum(w_I * r_I**2) + np.sum(w_D * r_D**2)) / idx.size
             if not np.isfinite(cost):
-                return DenseResult(T_prev, False, "non-finite cost", idx.size, history + [costs])
+                return DenseResult(T_prev, False, "non-finite cost", idx.size, history + [costs], tuple(ab_prev))
             if cost > prev_cost * (1.0 + 1e-7):
-                T = T_prev  # the last step made things worse: undo it, finish this level
+                T, ab = T_prev, ab_prev  # the last step made things worse: undo it, finish this level
                 break
             costs.append(cost)
             prev_cost = cost
@@ -270,15 +292,22 @@ def align(
             JwD = J_D * w_D
             H = JwI @ J_I.T + JwD @ J_D.T
             b = JwI @ r_I + JwD @ r_D
+            if affine:  # d r_I / d(a, b) = (-I_A, -1): two more rows of the photometric Jacobian
+                J_ab = np.stack([-np.take(I_ref, idx), np.full(idx.size, -1.0, np.float32)])
+                JwA = J_ab * w_I
+                H = np.block([[H, JwI @ J_ab.T], [JwA @ J_I.T, JwA @ J_ab.T]])
+                b = np.concatenate([b, JwA @ r_I])
             try:
                 delta = -np.linalg.solve(H.astype(float), b.astype(float))
             except np.linalg.LinAlgError:
-                return DenseResult(T, False, "singular normal equations", idx.size, history + [costs])
-            T_prev = T
-            T = se3_exp(delta) @ T
+                return DenseResult(T, False, "singular normal equations", idx.size, history + [costs], tuple(ab))
+            T_prev, ab_prev = T, ab
+            T = se3_exp(delta[:6]) @ T
+            if affine:
+                ab = ab + delta[6:]
             if np.linalg.norm(delta) < cfg.step_tolerance:
                 break
         history.append(costs)
-    if not np.all(np.isfinite(T)):
+    if not (np.all(np.isfinite(T)) and np.all(np.isfinite(ab))):
         return DenseResult(np.eye(4), False, "non-finite pose", valid_pixels, history)
-    return DenseResult(T, True, "", valid_pixels, history)
+    return DenseResult(T, True, "", valid_pixels, history, (float(ab[0]), float(ab[1])))
