@@ -22,6 +22,13 @@ dev clip N = 1 (today) 0.0986, 2: 0.100, 3: 0.128, 5: 0.226 m, also worse with a
 when the removed area grows; synthetic walking_static N = 3 0.0120 -> 0.0017, walking_xyz 0.0286
 -> 0.0256 m. Pre-removal compares the two depth images unwarped, so a longer baseline leaves it
 less to see (without pre-removal N = 3 beats N = 1 on Bonn dev: 0.314 against 0.456 m).
+
+Measured and not adopted (2026-12-05, with the brightness model): the update's residual images at
+the solver's finest level (half resolution, upsampled to the mask by nearest neighbour) instead of
+full resolution: 1.17x -> 1.07x opencv-odometry on the first 40 Bonn dev frames (3 rounds in
+lockstep), not the 1.0x asked for; ATE Bonn dev every frame / 2nd / 3rd / 4th 0.0911 / 0.0826 /
+0.1093 / 0.1259 -> 0.0929 / 0.0786 / 0.1010 / 0.1278 m, fr2/desk 0.0071 -> 0.0077, synthetic crowd
+0.0715 -> 0.0816, walking_xyz 0.0294 -> 0.0272 m: mixed, within a single run's spread.
 """
 from __future__ import annotations
 
@@ -63,7 +70,9 @@ class DepthClusterConfig:
         Bonn dev clip 0.0986 / 0.0911 m, every 2nd frame 0.1087 / 0.0826, every 3rd 0.1442 /
         0.1093, every 4th 0.2404 / 0.1259; TUM fr2/desk 0.0071 / 0.0071; synthetic walking_xyz
         0.0286 / 0.0294, walking_halfsphere 0.0157 / 0.0153, static_xyz 0.0055 / 0.0050 (no
-        exposure change there: the differences are those of another numerical path)
+        exposure change there: the differences are those of another numerical path). Added to
+        the paper alone (every other addition off) it made the Bonn dev clip worse, 0.1090 ->
+        0.1342 m (one run, cause not investigated)
     update_iterations : background updates after the first estimate (7 in the paper)
     refine_levels : pyramid levels of each update, which starts from the previous pose
         (3 = quarter resolution down to ``dense.finest_level``)

@@ -8,18 +8,19 @@ For a reference frame A and a current frame B, find ``T = T_B_A`` minimising
     w(x, T) = pi(T pi^-1(x, D_A(x)))
 
 (paper A, eq. 5; identity covariance, rho = Huber as in robust DVO-style odometry). Updates
-are left-multiplied: ``T <- exp(delta) T``.
+are left-multiplied: ``T <- exp(delta) T``. The sum runs over the valid pixels of A, optionally
+restricted by a mask of static pixels: paper A's method reuses this solver with its masks.
 
 With ``affine_brightness`` (off by default: eq. 5 as printed) the photometric residual is
 ``r_I(x) = I_B(w(x, T)) - (a I_A(x) + b)``, the gain a and bias b of the pair estimated with the
-pose (two more unknowns of the same Gauss-Newton step, as DSO's affine brightness model): a camera
-with automatic exposure changes the brightness of the whole image between frames. The sum runs over the valid pixels of A, optionally
-restricted by a mask of static pixels: paper A's method reuses this solver with its masks.
+pose (two more unknowns of the same Gauss-Newton step, DSO's affine brightness model): a camera
+with automatic exposure changes the brightness of the whole image between frames.
 
 Intensities are in [0, 1]; depth in metres.
 
 References: paper A (depthcluster), sec. 4, eq. 5; Kerl, Sturm, Cremers, "Robust odometry
-estimation for RGB-D cameras", ICRA 2013 (DVO).
+estimation for RGB-D cameras", ICRA 2013 (DVO); Engel, Koltun, Cremers, "Direct Sparse
+Odometry", TPAMI 2018 (affine brightness).
 """
 from __future__ import annotations
 
