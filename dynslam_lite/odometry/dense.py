@@ -264,10 +264,9 @@ def align(
             if not (np.isfinite(s.sum()) and np.isfinite(sd.sum())):  # a non-finite sample makes the sum non-finite
                 finite = np.isfinite(s @ ones) & np.isfinite(sd @ ones)
                 idx, s, sd = idx[finite], s[finite], sd[finite]
-            I_a = np.take(I_ref, idx)
-            if affine:  # the reference intensities under the pair's gain and bias
-                I_a = np.float32(ab[0]) * I_a + np.float32(ab[1])
-            r_I = s[:, 0] - I_a
+            I_A = np.take(I_ref, idx)
+            # the reference intensities, under the pair's gain and bias with affine_brightness
+            r_I = s[:, 0] - (np.float32(ab[0]) * I_A + np.float32(ab[1]) if affine else I_A)
             w_I = _huber_weights(r_I, cfg.huber_intensity)
             di = np.flatnonzero((sd[:, 2] > 0.999) & (s[:, 3] > 0))  # the samples with a depth residual
             Pi = np.take(P, idx, axis=1)
@@ -294,7 +293,7 @@ def align(
             H = JwI @ J_I.T + JwD @ J_D.T
             b = JwI @ r_I + JwD @ r_D
             if affine:  # d r_I / d(a, b) = (-I_A, -1): two more rows of the photometric Jacobian
-                J_ab = np.stack([-np.take(I_ref, idx), np.full(idx.size, -1.0, np.float32)])
+                J_ab = np.stack([-I_A, np.full(idx.size, -1.0, np.float32)])
                 JwA = J_ab * w_I
                 H = np.block([[H, JwI @ J_ab.T], [JwA @ J_I.T, JwA @ J_ab.T]])
                 b = np.concatenate([b, JwA @ r_I])
