@@ -25,10 +25,12 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from . import experiments, tables
 from .errors import BatchError, ConfigError, Interrupted
 from .download import ARCHIVES
-from .evaluation import evaluate
+from .evaluation import evaluate, exposure_pair_errors
 from .experiments import Run, RunRecord
 from .io import KeptSequence, atomic_write_text, format_trajectory, open_sequence, parse_trajectory
 from .pipeline import run_method
@@ -310,14 +312,19 @@ def evaluate_run(job: Job) -> Done | Failure:
         masks = run.mask_source(job.kind)
         r = run_method(run.method, seq, run.overrides, masks=masks)
         text = format_trajectory(r.trajectory)
-        errors = evaluate(seq.groundtruth, parse_trajectory(text, "estimate"))
+        estimate = parse_trajectory(text, "estimate")
+        errors = evaluate(seq.groundtruth, estimate)
+        extras = dict(r.extras)
+        exposure = Path(job.path) / "exposure.txt"  # a synthetic scene with automatic exposure
+        if exposure.is_file():
+            extras.update(exposure_pair_errors(seq.groundtruth, estimate, np.loadtxt(exposure, ndmin=2)))
     except Exception as exc:
         return Failure(job, f"{type(exc).__name__}: {exc}", time.perf_counter() - t)
     errors.aligned = None  # not needed past this point; keeps the record small
     record = RunRecord(
         job.sequence, run.label, run.method, masks, _relative(job.path), len(seq), errors,
         len(r.failed_frames), r.stats()["ms_per_frame"],
-        {k: float(sum(v)) / len(seq) for k, v in r.stage_ms.items()}, r.extras, r.scores,
+        {k: float(sum(v)) / len(seq) for k, v in r.stage_ms.items()}, extras, r.scores,
         r.scored_points, f"{job.name}/{file_name(run.label)}.txt", job.stride)
     return Done(record, text, time.perf_counter() - t)
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .evaluation import ErrorStats, MaskScores, TrajectoryErrors
-from .synth.scene import OBJECT_SCENES, TUM_SCENES
+from .synth.scene import EXPOSURE_SCENES, OBJECT_SCENES, TUM_SCENES
 
 # The semantic mask source a run takes from its data: the synthetic ground truth split into
 # instances (what a perfect person detector gives), and on real data the bundled person model.
@@ -208,6 +208,8 @@ OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FI
 # the same where the mask source misses the near people for a while (the crowd)
 MISSED_ROWS = (STATIC_ORB_MISSED, STATIC_ORB_MISSED_SCREEN, WS_MISSED_NO_SCREEN, WS_MISSED, BG_MISSED_NO_SCREEN,
                BG_MISSED)
+# the methods on walking_exposure (the same runs exist on walking_xyz, the same frames at one exposure)
+EXPOSURE_ROWS = (STATIC_DENSE, OPENCV_ODOMETRY, DC_NO_BRIGHTNESS, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE)
 # paper A's ablation runs (the default is run anyway)
 DC_ABLATION = (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_BRIGHTNESS, DC_NO_SELECT, DC_NO_BRIGHTNESS)
 # the methods of the summary figure; at lower frame rates depthcluster without its pose selection
@@ -234,6 +236,8 @@ RUN_SETS = (
     # our object scenes: papers B and C where people carry and push things, stand still, crowd
     RunSet("object scenes", OBJECT_ROWS, scenes=OBJECT_SCENES),
     RunSet("missed detections", MISSED_ROWS, scenes=("crowd",)),
+    # walking_xyz seen by a camera with automatic exposure: what a brightness change costs each method
+    RunSet("automatic exposure", EXPOSURE_ROWS, scenes=EXPOSURE_SCENES),
     RunSet("sensitivity on the object scenes", SENSITIVITY, scenes=OBJECT_SCENES),
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,
@@ -297,7 +301,8 @@ class RunRecord:
     errors : ATE and 1-s RPE against ground truth
     failed_frames : frames whose tracking failed
     ms_per_frame : mean wall-clock time per frame; stages: ms per frame of each stage
-    extras : the method's own statistics; scores: its verdicts against ground truth
+    extras : the method's own statistics (on a scene with automatic exposure also
+        :func:`~dynslam_lite.evaluation.exposure_pair_errors`); scores: its verdicts against ground truth
         (:attr:`dynslam_lite.pipeline.RunResult.scores`); scored_points: keypoints scored
     trajectory : the estimate's file, relative to ``trajectories/``
     stride : the sequence was tracked every ``stride``-th frame (1: every frame)

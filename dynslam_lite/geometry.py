@@ -332,7 +332,7 @@ def _exact_parts(image: np.ndarray) -> list[np.ndarray]:
     return [np.ascontiguousarray(image[..., e - k:e]) for k, e in zip(sizes, ends)]
 
 
-def interpolate(image, u: np.ndarray, v: np.ndarray, wrap: bool = False):
+def interpolate(image, u: np.ndarray, v: np.ndarray, wrap: bool = False, inside: bool = False):
     """Bilinear samples of an image at scattered sub-pixel positions, with ``cv2.remap``.
 
     Parameters
@@ -341,6 +341,8 @@ def interpolate(image, u: np.ndarray, v: np.ndarray, wrap: bool = False):
         same maps (images of 1, 3 or 4 channels are sampled without a copy, see :func:`_exact_parts`)
     u, v : (N,) float, column / row coordinates (pixel centres at integers)
     wrap : tile the image (textures) instead of returning NaN outside ``[0, W-1] x [0, H-1]``
+    inside : the caller has checked that every position lies in ``[0, W-1] x [0, H-1]`` (no NaN
+        marking needed)
     Returns
     -------
     (N,) or (N, C) float32; a tuple of them for a tuple of images
@@ -349,15 +351,15 @@ def interpolate(image, u: np.ndarray, v: np.ndarray, wrap: bool = False):
     n = u.size
     cols = 1024  # remap maps are limited to 32767 rows: lay the N samples out as a block
     rows = max(1, -(-n // cols))
-    mu = np.full(rows * cols, -1.0, np.float32)
-    mv = np.full(rows * cols, -1.0, np.float32)
+    mu, mv = np.empty(rows * cols, np.float32), np.empty(rows * cols, np.float32)
     mu[:n], mv[:n] = u, v
+    mu[n:] = mv[n:] = -1.0
     mu, mv = mu.reshape(rows, cols), mv.reshape(rows, cols)
     # replicate, then mark outside samples: a constant NaN border would leak into samples
     # lying exactly on the last row or column (NaN * 0 weight)
     border = cv2.BORDER_WRAP if wrap else cv2.BORDER_REPLICATE
     H, W = images[0].shape[:2]
-    outside = None if wrap else ~((u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1))
+    outside = None if wrap or inside else ~((u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1))
     samples = []
     for img in images:
         parts = [cv2.remap(p, mu, mv, cv2.INTER_LINEAR, borderMode=border).reshape((rows * cols,) + p.shape[2:])[:n]

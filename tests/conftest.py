@@ -69,3 +69,21 @@ def tiny_tables(tmp_path_factory):
     assert main(["reproduce", "--profile", "tiny", "--jobs", "2", "--no-notebooks",
                  "--cache", str(root / "cache"), "--reports", str(root / "reports")]) == 0
     return {p.name: p.read_bytes() for p in (root / "reports" / "tables").iterdir()}
+
+
+def tiny_plan(real_frames: int = 0) -> tuple[int, int]:
+    """(runs, frames to track) of the tiny profile, with one real sequence of ``real_frames``
+    frames when > 0: from the registry, so a new run of it needs no test edited."""
+    from dynslam_lite import experiments as E
+    from dynslam_lite.batch import load_registry
+
+    tiny = load_registry()[0]["tiny"]
+    runs = frames = 0
+    for scene in tiny["scenes"]:
+        n = len(E.runs_for("synthetic", scene))
+        runs, frames = runs + n, frames + n * tiny["frames"]
+    if real_frames:
+        for stride in E.strides():
+            n = len(E.runs_for("real", None, stride))
+            runs, frames = runs + n, frames + n * -(-real_frames // stride)
+    return runs, frames

@@ -9,6 +9,7 @@ import pytest
 from dynslam_lite.cli import main
 from dynslam_lite.reports import code_fingerprint
 
+from conftest import tiny_plan
 from test_notebooks import FIGURES
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -77,7 +78,8 @@ def test_reproduce_tiny_writes_every_indexed_file_and_a_failed_run_keeps_reports
     args = ["reproduce", "--profile", "tiny", "--jobs", "2", "--cache", str(cache), "--reports", str(reports)]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "[summary]" in out and "6 ok, 0 failed" in out and "[run 31/31]" in out
+    n = tiny_plan()[0]
+    assert "[summary]" in out and "6 ok, 0 failed" in out and f"[run {n}/{n}]" in out
     table = (reports / "tables" / "summary.md").read_text()
     assert "synthetic/walking_xyz" in table and "opencv-odometry" in table and "reduction vs static-orb" in table
     a1 = (reports / "tables" / "paper_a_table1.md").read_text()
@@ -94,7 +96,7 @@ def test_reproduce_tiny_writes_every_indexed_file_and_a_failed_run_keeps_reports
     prov = json.loads((reports / "provenance.json").read_text())
     assert prov["profile"] == "tiny" and prov["code_sha256"] == code_fingerprint(ROOT)
     runs = json.loads((reports / "trajectories" / "runs.json").read_text())
-    assert len(runs) == 31 and all((reports / "trajectories" / r["trajectory"]).exists() for r in runs)
+    assert len(runs) == n and all((reports / "trajectories" / r["trajectory"]).exists() for r in runs)
     figures = sorted(p.name for p in (reports / "figures").iterdir())
     tables = {p.name: p.read_bytes() for p in (reports / "tables").iterdir() if p.stem not in TIMED}
     # deterministic (another batch, its own runs), and notebook 90's tables equal the batch's own
@@ -102,7 +104,7 @@ def test_reproduce_tiny_writes_every_indexed_file_and_a_failed_run_keeps_reports
     capsys.readouterr()
     assert main(args + ["--no-notebooks"]) == 0  # every run taken from the run cache
     out = capsys.readouterr().out
-    assert "31 finished earlier" in out and out.count("[cached ") == 31 and "[run 1/" not in out
+    assert f"{n} finished earlier" in out and out.count("[cached ") == n and "[run 1/" not in out
     cached = {p.name: p.read_bytes() for p in (reports / "tables").iterdir()}
     assert {k: v for k, v in cached.items() if k.split(".")[0] not in TIMED} == tables
     assert sorted(p.name for p in (reports / "figures").iterdir()) == figures  # left in place

@@ -10,6 +10,8 @@ from dynslam_lite import experiments as E
 from dynslam_lite.cli import main
 from dynslam_lite.synth import ensure_scene
 
+from conftest import tiny_plan
+
 TIMED = ("timing", "paper_b_table4")  # wall-clock columns
 TUM = "rgbd_dataset_freiburg3_walking_xyz"  # the folder TUM's archive of fr3/walking_xyz unpacks to
 
@@ -42,8 +44,9 @@ def _run(args):
 
 def test_the_plan_and_an_eta_are_printed(local):
     _, out, _ = local
-    assert "[plan] 76 runs, 800 frames to track; about" in out
-    assert "[run 76/76]" in out and ", ETA " in out
+    runs, frames = tiny_plan(real_frames=12)
+    assert f"[plan] {runs} runs, {frames} frames to track; about" in out
+    assert f"[run {runs}/{runs}]" in out and ", ETA " in out
 
 
 def test_a_tum_named_sequence_fills_the_papers_own_rows(local):
@@ -83,8 +86,9 @@ def test_reproduce_on_a_local_dask_cluster_gives_the_local_tables(local):
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         # --fresh: every run goes to the cluster's workers, none is taken from the run cache
         out = _run(args + ["--fresh", "--scheduler", cluster.scheduler_address, "--reports", str(root / "dask")])
-    assert f"76 to run on 2 worker(s) of the Dask cluster at {cluster.scheduler_address}" in out
-    assert "[run 76/76]" in out and "[cached" not in out
+    runs = tiny_plan(real_frames=12)[0]
+    assert f"{runs} to run on 2 worker(s) of the Dask cluster at {cluster.scheduler_address}" in out
+    assert f"[run {runs}/{runs}]" in out and "[cached" not in out
     assert _tables(root / "dask") == _tables(root / "local")
 
 

@@ -105,3 +105,21 @@ def test_motionless_estimate_is_scored_not_raised():
     e = evaluate(gt, est)
     spread = np.linalg.norm(gt.positions - gt.positions.mean(axis=0), axis=1)
     assert e.ate.rmse == pytest.approx(np.sqrt(np.mean(spread**2)))
+
+
+def test_exposure_pair_errors_split_the_frame_to_frame_errors_at_the_changes():
+    """A 5 mm error in each pair across an exposure change, 1 mm elsewhere: the two means."""
+    from dynslam_lite.evaluation import exposure_pair_errors
+
+    t = np.arange(40) / 30.0
+    gain = np.where(t < 12 / 30, 1.0, np.where(t < 25 / 30, 1.1, 0.95))
+    gt = Trajectory(t, np.stack([se3_exp([0.01 * k, 0, 0, 0, 0.002 * k, 0]) for k in range(40)]))
+    poses, T = [gt.poses[0]], gt.poses[0]
+    for k in range(1, 40):
+        step = np.linalg.inv(gt.poses[k - 1]) @ gt.poses[k]
+        T = T @ step @ se3_exp([0.005 if gain[k] != gain[k - 1] else 0.001, 0, 0, 0, 0, 0])
+        poses.append(T)
+    out = exposure_pair_errors(gt, Trajectory(t, np.stack(poses)), np.column_stack([t, gain]))
+    assert out["exposure_changes"] == 2
+    assert out["pair_error_mm_exposure_change"] == pytest.approx(5.0, abs=1e-6)
+    assert out["pair_error_mm_elsewhere"] == pytest.approx(1.0, abs=1e-6)

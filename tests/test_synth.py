@@ -148,3 +148,29 @@ def test_oracle_moving_masks_are_the_moving_objects_one_per_instance(tmp_path):
     ids = [set(np.unique(f.instances[m])) for m in moving]
     assert all(len(s) == 1 for s in ids) and len(moving) == len(np.unique(f.instances[f.mask]))
     assert {f.classes[s.pop()] for s in ids} >= {"person", "board"}
+
+
+def test_exposure_scene_is_walking_xyz_under_the_gain_and_bias_it_writes(scene):
+    """walking_exposure: the frames of walking_xyz (depth and masks byte for byte) with the image
+    brightness changed every 10-13 frames by the gain and bias of its exposure.txt; the schedule
+    of a frame does not depend on the frame count."""
+    from dynslam_lite.synth.generator import exposure_schedule
+
+    exp, plain = open_sequence(scene("walking_exposure", 57)), open_sequence(scene("walking_xyz", 150))
+    table = np.loadtxt(exp.root / "exposure.txt")
+    assert np.allclose(table[:, 0], exp.timestamps)
+    gain, bias = table[:, 1], table[:, 2]
+    changes = np.flatnonzero(np.diff(gain)) + 1
+    assert gain[0] == 1.0 and bias[0] == 0.0 and len(changes) >= 4 and np.all(np.diff(changes) >= 10)
+    assert np.all(np.abs(np.log(gain[changes]) - np.log(gain[changes - 1])) >= 0.04 - 1e-6)
+    short, long = exposure_schedule("walking_exposure", 0, 20), exposure_schedule("walking_exposure", 0, 57)
+    assert np.array_equal(short[0], long[0][:20]) and np.array_equal(short[1], long[1][:20])
+    assert np.allclose(long[0], gain, atol=1e-6) and np.allclose(long[1], bias, atol=1e-6)
+    assert np.all(exposure_schedule("walking_xyz", 0, 57)[0] == 1.0)
+    for i in (0, int(changes[0]), 56):
+        a, b = exp[i], plain[i]
+        assert np.array_equal(a.depth, b.depth) and np.array_equal(a.mask, b.mask)
+        x, y = b.rgb.astype(float).ravel() / 255, a.rgb.astype(float).ravel() / 255
+        ok = (y > 0.02) & (y < 0.98)  # not clipped
+        g, c = np.polyfit(x[ok], y[ok], 1)
+        assert abs(g - gain[i]) < 0.01 and abs(c - bias[i]) < 0.005, (i, g, c, gain[i], bias[i])

@@ -10,6 +10,8 @@ Output folder::
                                        the ids that move
     background/, background.txt        (with background=True) frames without the people
     camera.txt                         fx fy cx cy width height depth_scale
+    exposure.txt                       (scenes with automatic exposure) per colour frame the gain
+                                       and bias applied to the image brightness
     scene.json                         scene, seed, frame count, generator version
 
 Colour timestamps are 30 Hz with 1.5 ms jitter; depth timestamps are up to 8 ms away from
@@ -32,7 +34,7 @@ from ..errors import ConfigError
 from ..geometry import PinholeCamera
 from ..io import Trajectory, format_trajectory
 from .raycast import pixel_rays, render
-from .scene import (FURNITURE, SCENES, camera_pose, chairs_for, furniture_names, movers_for, pattern_of,
+from .scene import (EXPOSURE_SCENES, FURNITURE, SCENES, camera_pose, chairs_for, furniture_names, movers_for, pattern_of,
                     people_for, static_boxes)
 from .sensor import degrade_depth, degrade_rgb
 from .textures import make_textures
@@ -50,6 +52,31 @@ SCENE_VERSION = {"walking_push": 4}  # 4: the pushed object is a large printed b
 def version_of(scene: str) -> int:
     """The generator version written into (and expected in) a scene's ``scene.json``."""
     return SCENE_VERSION.get(scene, GENERATOR_VERSION)
+
+
+def exposure_schedule(scene: str, seed: int, frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame the (gain, bias) of the image brightness, ``I' = clip(gain I + bias, 0, 1)``
+    before the sensor noise; (1, 0) throughout for the scenes without automatic exposure.
+
+    A camera with automatic exposure (:data:`EXPOSURE_SCENES`) changes it every 10-13 frames:
+    the gain by 4-10 % (within exp(+-0.2) of 1), the bias to a new value in [-0.025, 0.025]:
+    the median intensity of the room moves by 0.02-0.08 (5-20 grey levels) at a change, as on
+    the Bonn dev clip (up to 0.074 there). Frame i's values depend on the seed and i alone, not on
+    the frame count.
+    """
+    gain, bias = np.ones(frames), np.zeros(frames)
+    if scene not in EXPOSURE_SCENES:
+        return gain, bias
+    rng = np.random.default_rng([seed, 5])
+    g, i = 1.0, int(rng.integers(10, 14))
+    while i < frames:
+        step = rng.uniform(0.04, 0.10) * rng.choice((-1.0, 1.0))
+        if abs(np.log(g) + step) > 0.2:
+            step = -step
+        g *= np.exp(step)
+        gain[i:], bias[i:] = g, rng.uniform(-0.025, 0.025)
+        i += int(rng.integers(10, 14))
+    return gain, bias
 
 
 LIGHT_W = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
@@ -126,6 +153,9 @@ class SceneRenderer:
         rgb, depth, _, no_depth, instance = render(
             self.camera, self.pose(s), boxes, groups, self.textures, LIGHT_W, self.rays
         )
+        if self.scene in EXPOSURE_SCENES:
+            gain, bias = (float(x[index]) for x in exposure_schedule(self.scene, self.seed, index + 1))
+            rgb = np.clip(np.float32(gain) * rgb + np.float32(bias), 0.0, 1.0)
         moving = np.isin(instance, self.moving_ids(s))
         rng = np.random.default_rng([self.seed, 2, index])  # per frame: order-independent
         return degrade_rgb(rgb, rng), degrade_depth(depth, no_depth, rng), moving, instance
@@ -224,6 +254,11 @@ def generate(
         (tmp / "groundtruth.txt").write_text(
             "# ground truth trajectory (synthetic, exact)\n" + format_trajectory(gt)
         )
+        if scene in EXPOSURE_SCENES:
+            gain, bias = exposure_schedule(scene, seed, frames)
+            (tmp / "exposure.txt").write_text("# image brightness of each colour frame: I' = gain I + bias\n"
+                                              "# timestamp gain bias\n" + "".join(
+                f"{t:.6f} {g:.6f} {b:.6f}\n" for t, g, b in zip(t_rgb, gain, bias)))
         (tmp / "camera.txt").write_text(
             "# fx fy cx cy width height depth_scale\n"
             f"{cam.fx} {cam.fy} {cam.cx} {cam.cy} {cam.width} {cam.height} {cam.depth_scale:g}\n"

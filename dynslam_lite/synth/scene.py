@@ -22,8 +22,10 @@ TUM_SCENES = (
     "static_xyz",
 )
 OBJECT_SCENES = ("walking_carry", "walking_push", "crowd")
-SCENES = TUM_SCENES + OBJECT_SCENES
-_PATTERN = {"walking_carry": "xyz", "walking_push": "halfsphere", "crowd": "xyz"}
+# walking_xyz's frames seen by a camera with automatic exposure (see generator.exposure_schedule)
+EXPOSURE_SCENES = ("walking_exposure",)
+SCENES = TUM_SCENES + OBJECT_SCENES + EXPOSURE_SCENES
+_PATTERN = {"walking_carry": "xyz", "walking_push": "halfsphere", "crowd": "xyz", "walking_exposure": "xyz"}
 
 # object classes of the furniture (what an instance segmenter such as Mask R-CNN would label);
 # boxes of one object share its name
