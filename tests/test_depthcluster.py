@@ -253,9 +253,7 @@ def test_rendered_exposure_change_gain_and_bias_recovered_and_pose_kept(scene):
     i = 56
     assert g[i] != g[i - 1]
     A, B = seq[i - 1], seq[i]
-    gt = seq.groundtruth
-    pose = lambda t: gt.poses[np.argmin(np.abs(gt.timestamps - t))]  # noqa: E731
-    T_true = invert(pose(B.timestamp)) @ pose(A.timestamp)
+    T_true = invert(seq.groundtruth.nearest(B.timestamp)) @ seq.groundtruth.nearest(A.timestamp)
     args = (A.gray.astype(np.float32) / 255, A.depth, B.gray.astype(np.float32) / 255, B.depth, seq.camera)
     res = {aff: estimate_pair(*args, config=DepthClusterConfig(dense=DenseConfig(affine_brightness=aff)))
            for aff in (True, False)}
