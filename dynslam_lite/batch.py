@@ -25,7 +25,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
 
 from . import experiments, tables
 from .errors import BatchError, ConfigError, Interrupted
@@ -315,9 +314,8 @@ def evaluate_run(job: Job) -> Done | Failure:
         estimate = parse_trajectory(text, "estimate")
         errors = evaluate(seq.groundtruth, estimate)
         extras = dict(r.extras)
-        exposure = Path(job.path) / "exposure.txt"  # a synthetic scene with automatic exposure
-        if exposure.is_file():
-            extras.update(exposure_pair_errors(seq.groundtruth, estimate, np.loadtxt(exposure, ndmin=2)))
+        if seq.exposure is not None:  # a synthetic scene with automatic exposure
+            extras.update(exposure_pair_errors(seq.groundtruth, estimate, seq.timestamps, seq.exposure[:, 0]))
     except Exception as exc:
         return Failure(job, f"{type(exc).__name__}: {exc}", time.perf_counter() - t)
     errors.aligned = None  # not needed past this point; keeps the record small
@@ -516,6 +514,10 @@ def _reproduce(opt: Options) -> int:
                     failed_nbs.append((name, err))
                 elif path.exists():
                     _portable(path, portable)
+        if code_fingerprint(ROOT) != fingerprint:  # the workers and notebook kernels import the working tree
+            raise BatchError(f"the code changed while the batch ran (code fingerprint {fingerprint[:12]} at "
+                             f"the start): its runs and notebooks are not of one version; {opt.reports}/ "
+                             "left as it was. Run it again on a tree that stays as it is")
         writer.write_text("provenance.json", _provenance(opt, prof, frames, command, fingerprint))
         writer.write_text("README.md", _index(opt, prof, frames, command))
         _summary(records, failed, nb_times, failed_nbs, t_nb - t_runs, time.perf_counter() - t0)

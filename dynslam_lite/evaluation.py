@@ -149,23 +149,25 @@ def rpe(gt: Trajectory, est: Trajectory, delta_s: float = 1.0) -> tuple[ErrorSta
     return ErrorStats.of(trans), ErrorStats.of(rot)
 
 
-def exposure_pair_errors(gt: Trajectory, est: Trajectory, exposure: np.ndarray) -> dict[str, float]:
+def exposure_pair_errors(gt: Trajectory, est: Trajectory, timestamps: np.ndarray,
+                         gain: np.ndarray) -> dict[str, float]:
     """Frame-to-frame translation error (mm) of the pairs across an exposure change and of the
     others: what a change of the image brightness costs a method, with the rest of the
     trajectory's errors set aside.
 
     Parameters
     ----------
-    exposure : (N, 2+) rows ``timestamp gain ...`` of the colour frames (a synthetic scene's
-        ``exposure.txt``)
+    timestamps, gain : (N,) each colour frame's time and exposure gain
+        (:attr:`~dynslam_lite.io.RGBDSequence.exposure`); a pair is across a change when its
+        two frames' gains differ
     Returns
     -------
     {'pair_error_mm_exposure_change', 'pair_error_mm_elsewhere'} means, and
     'exposure_changes': the number of pairs across a change
     """
     stamps, trans, _ = rpe_errors(gt, est, delta_s=float(np.median(np.diff(est.timestamps))))
-    t, gain = exposure[:, 0], exposure[:, 1]
-    k = _closest(t, stamps)  # the pair's later frame
+    gain = np.asarray(gain)
+    k = _closest(np.asarray(timestamps), stamps)  # the pair's later frame
     across = gain[k] != gain[np.maximum(k - 1, 0)]
     mean = lambda x: float(np.mean(x) * 1000.0) if x.size else float("nan")  # noqa: E731
     return {"pair_error_mm_exposure_change": mean(trans[across]), "pair_error_mm_elsewhere": mean(trans[~across]),

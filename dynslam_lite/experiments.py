@@ -237,7 +237,7 @@ RUN_SETS = (
     RunSet("object scenes", OBJECT_ROWS, scenes=OBJECT_SCENES),
     RunSet("missed detections", MISSED_ROWS, scenes=("crowd",)),
     # walking_xyz seen by a camera with automatic exposure: what a brightness change costs each method
-    RunSet("automatic exposure", EXPOSURE_ROWS, scenes=EXPOSURE_SCENES),
+    RunSet("automatic exposure", EXPOSURE_ROWS, scenes=tuple(EXPOSURE_SCENES)),
     RunSet("sensitivity on the object scenes", SENSITIVITY, scenes=OBJECT_SCENES),
     # real data: the bundled person model (a stand-in for the papers' networks), and without masks
     RunSet("real data", (STATIC_DENSE, OPENCV_ODOMETRY, OPENCV_FAST, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE,

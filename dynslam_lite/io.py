@@ -387,6 +387,8 @@ class RGBDSequence:
     instance_files : list[Path or None] or None, ground-truth instance ids (synthetic)
     classes : {instance id: class} of the instance images, or None
     moving_ids : per frame, the instance ids that move, or None
+    exposure : (N, 2) float, per frame the gain and bias of the image brightness
+        (``exposure.txt`` of a synthetic scene with automatic exposure), or None
     """
 
     root: Path
@@ -402,6 +404,7 @@ class RGBDSequence:
     instance_files: list[Path | None] | None = None
     classes: dict[int, str] | None = None
     moving_ids: list[list[int]] | None = None
+    exposure: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.timestamps)
@@ -468,6 +471,7 @@ class RGBDSequence:
             self.name,
             None if self.instance_files is None else self.instance_files[sl], self.classes,
             None if self.moving_ids is None else self.moving_ids[sl],
+            None if self.exposure is None else self.exposure[sl],
         )
 
 
@@ -529,6 +533,21 @@ def load_mask(path: Path) -> np.ndarray:
     if img is None:
         raise SequenceError(f"{path}: cannot read mask image")
     return img > 127
+
+
+def _per_frame_values(path: Path, stamps: list[float], columns: int) -> np.ndarray:
+    """(len(stamps), columns) floats of a ``timestamp value...`` list, one row per colour timestamp."""
+    rows = {}
+    for t, cols in read_file_list(path, columns + 1):
+        try:
+            rows[round(t, 6)] = [float(c) for c in cols[:columns]]
+        except ValueError:
+            raise SequenceError(f"{path}: expected {columns} numbers after the timestamp {t:.6f}, got "
+                                f"{' '.join(cols[:columns])!r}") from None
+    missing = [t for t in stamps if round(t, 6) not in rows]
+    if missing:
+        raise SequenceError(f"{path}: no row for {len(missing)} colour frame(s), first at {missing[0]:.6f}")
+    return np.array([rows[round(t, 6)] for t in stamps], float).reshape(len(stamps), columns)
 
 
 def open_sequence(
@@ -605,9 +624,12 @@ def open_sequence(
     if (root / "background.txt").is_file():
         blist = {round(t, 6): root / cols[0] for t, cols in read_file_list(root / "background.txt")}
         backgrounds = [blist.get(round(float(ta[i]), 6)) for i, _ in matches]
+    exposure = None
+    if (root / "exposure.txt").is_file():  # synthetic: a camera with automatic exposure
+        exposure = _per_frame_values(root / "exposure.txt", [float(ta[i]) for i, _ in matches], 2)
     seq = RGBDSequence(
         root, cam, rgb_files, depth_files,
         np.array([ta[i] for i, _ in matches]), np.array([tb[j] for _, j in matches]),
-        gt, masks, backgrounds, root.resolve().name, instances, classes, moving,
+        gt, masks, backgrounds, root.resolve().name, instances, classes, moving, exposure,
     )
     return seq.window(start, count, step) if (start or count is not None or step != 1) else seq

@@ -13,6 +13,7 @@ from .evaluation import ErrorStats, MaskScores
 from .masks import MISSED
 from .experiments import RunRecord
 from .reports import fmt
+from .synth.scene import EXPOSURE_SCENES
 
 Table = tuple[list[str], list[list], str]
 Index = dict[tuple[str, str], RunRecord]
@@ -655,21 +656,22 @@ def real_frame_rate(results: list[RunRecord]) -> Table:
 
 
 def exposure(results: list[RunRecord]) -> Table:
-    """Each method on walking_xyz and on the same frames with automatic exposure (walking_exposure):
-    ATE of both, and the frame-to-frame error of the pairs across an exposure change beside that
-    of the other pairs."""
+    """Each method on a scene with automatic exposure and on the scene whose frames it shows at
+    one exposure (walking_exposure and walking_xyz): ATE of both, and the frame-to-frame error of
+    the pairs across an exposure change beside that of the other pairs."""
     idx = _index(results)
-    header = ["method", "ATE RMSE (m), walking_xyz", "ATE RMSE (m), walking_exposure",
-              "pair error (mm), across an exposure change", "pair error (mm), other pairs", "ratio"]
+    header = ["scene (same frames at one exposure)", "method", "ATE RMSE (m), one exposure",
+              "ATE RMSE (m), automatic exposure", "pair error (mm), across an exposure change",
+              "pair error (mm), other pairs", "ratio"]
     rows = []
-    for scene in E.EXPOSURE_SCENES:
+    for scene, base_scene in EXPOSURE_SCENES.items():
         for run in E.EXPOSURE_ROWS:
-            r, base = idx.get((f"synthetic/{scene}", run.label)), idx.get(("synthetic/walking_xyz", run.label))
+            r, base = idx.get((f"synthetic/{scene}", run.label)), idx.get((f"synthetic/{base_scene}", run.label))
             if r is None or "pair_error_mm_exposure_change" not in r.extras:
                 continue
             at, other = r.extras["pair_error_mm_exposure_change"], r.extras["pair_error_mm_elsewhere"]
-            rows.append([run.label, base.errors.ate.rmse if base else "-", r.errors.ate.rmse,
-                         f"{at:.1f}", f"{other:.1f}", f"{at / other:.2f}"])
+            rows.append([f"{scene} ({base_scene})", run.label, base.errors.ate.rmse if base else "-",
+                         r.errors.ate.rmse, f"{at:.1f}", f"{other:.1f}", f"{at / other:.2f}"])
     notes = ("walking_exposure is walking_xyz (the same camera path, people, textures and sensor noise) "
              "seen by a camera with automatic exposure: every 10-13 frames the image brightness "
              "changes by a gain of 4-10 % and a new bias (the scene's exposure.txt; the median "

@@ -146,3 +146,22 @@ def test_failed_run_and_failed_notebook_are_reported_and_reports_kept(tmp_path, 
     assert "run(s) and 1 notebook(s) failed" in captured.err and "left as it was" in captured.err
     assert (reports / "tables" / "summary.md").read_text() == "earlier good run\n"
     assert sorted(p.name for p in reports.rglob("*")) == ["summary.md", "tables"]
+
+
+def test_code_changed_during_the_batch_fails_it_and_keeps_reports(tmp_path, capsys, monkeypatch):
+    """Runs and notebooks import the working tree: when its code fingerprint at the end differs
+    from the start, the batch stops before provenance.json and reports/ keeps what it had."""
+    import dynslam_lite.batch as batch
+
+    reports = tmp_path / "reports"
+    (reports / "tables").mkdir(parents=True)
+    (reports / "tables" / "summary.md").write_text("earlier good run\n")
+    prints = iter(["start", "edited"])
+    monkeypatch.setattr(batch, "code_fingerprint", lambda root, **kw: "cache" if kw else next(prints))
+    monkeypatch.setattr(batch, "load_registry", lambda: ({"tiny": {"scenes": ("static_xyz",), "frames": 6}}, {}))
+    rc = main(["reproduce", "--profile", "tiny", "--jobs", "2", "--cache", str(tmp_path / "cache"),
+               "--reports", str(reports)])
+    captured = capsys.readouterr()
+    assert rc == 2 and "the code changed while the batch ran" in captured.err and "left as it was" in captured.err
+    assert (reports / "tables" / "summary.md").read_text() == "earlier good run\n"
+    assert sorted(p.name for p in reports.rglob("*")) == ["summary.md", "tables"]

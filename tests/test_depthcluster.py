@@ -249,7 +249,7 @@ def test_rendered_exposure_change_gain_and_bias_recovered_and_pose_kept(scene):
     brightness model maps the reference intensities as the written gains and biases do (within
     0.01 over [0.1, 0.7]) and keeps the pose within 3 mm; eq. 5 as printed is 3x further off."""
     seq = open_sequence(scene("walking_exposure", 57))
-    g, b = np.loadtxt(seq.root / "exposure.txt")[:, 1:3].T
+    g, b = seq.exposure.T
     i = 56
     assert g[i] != g[i - 1]
     A, B = seq[i - 1], seq[i]

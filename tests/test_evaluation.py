@@ -119,7 +119,7 @@ def test_exposure_pair_errors_split_the_frame_to_frame_errors_at_the_changes():
         step = np.linalg.inv(gt.poses[k - 1]) @ gt.poses[k]
         T = T @ step @ se3_exp([0.005 if gain[k] != gain[k - 1] else 0.001, 0, 0, 0, 0, 0])
         poses.append(T)
-    out = exposure_pair_errors(gt, Trajectory(t, np.stack(poses)), np.column_stack([t, gain]))
+    out = exposure_pair_errors(gt, Trajectory(t, np.stack(poses)), t, gain)
     assert out["exposure_changes"] == 2
     assert out["pair_error_mm_exposure_change"] == pytest.approx(5.0, abs=1e-6)
     assert out["pair_error_mm_elsewhere"] == pytest.approx(1.0, abs=1e-6)

@@ -231,3 +231,19 @@ def test_sensitivity_rows_hold_the_default_and_both_budgets_of_each_object_scene
     assert [r[:2] for r in rows] == [[push, E.BGRESTORE.label], [bonn, E.WEIGHTEDSTATIC.label]]
     assert rows[1][:5] == [bonn, E.WEIGHTEDSTATIC.label, 0.02, 0.01, 0.03]
     assert abs(rows[1][5] - 0.02) < 1e-12 and rows[1][6] == "3.00" and rows[0][6] == "2.00"
+
+
+def test_exposure_table_sets_each_exposure_scene_beside_the_scene_it_shows_at_one_exposure():
+    from dynslam_lite import tables
+    from dynslam_lite.synth import EXPOSURE_SCENES
+
+    assert EXPOSURE_SCENES == {"walking_exposure": "walking_xyz"}
+    assert all(r in E.runs_for("synthetic", "walking_exposure") for r in E.EXPOSURE_ROWS)
+    recs = [_record("synthetic/walking_exposure", E.DEPTHCLUSTER, 0.03), _record("synthetic/walking_xyz", E.DEPTHCLUSTER, 0.02),
+            _record("synthetic/walking_exposure", E.WEIGHTEDSTATIC, 0.01), _record("synthetic/walking_carry", E.BGRESTORE, 0.5)]
+    recs[0].extras = {"pair_error_mm_exposure_change": 3.0, "pair_error_mm_elsewhere": 2.0}
+    recs[2].extras = {"pair_error_mm_exposure_change": 1.0, "pair_error_mm_elsewhere": 4.0}
+    header, rows, _ = tables.exposure(recs)
+    assert len(header) == len(rows[0]) == 7
+    assert rows == [["walking_exposure (walking_xyz)", E.DEPTHCLUSTER.label, 0.02, 0.03, "3.0", "2.0", "1.50"],
+                    ["walking_exposure (walking_xyz)", E.WEIGHTEDSTATIC.label, "-", 0.01, "1.0", "4.0", "0.25"]]

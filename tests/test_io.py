@@ -62,6 +62,17 @@ def test_every_nth_frame(tmp_path):
         open_sequence(root, step=0)
 
 
+def test_exposure_list_is_read_per_frame_and_windowed(tmp_path):
+    """A synthetic scene's exposure.txt: gain and bias per colour frame, sliced with the frames."""
+    root = _write_sequence(tmp_path / "s", n=4)
+    (root / "exposure.txt").write_text("# timestamp gain bias\n" + "".join(
+        f"{10.0 + i / 30:.6f} {1 + i / 10} {-i / 100}\n" for i in range(4)))
+    seq = open_sequence(root)
+    assert np.allclose(seq.exposure, [[1.0, 0.0], [1.1, -0.01], [1.2, -0.02], [1.3, -0.03]])
+    assert np.allclose(open_sequence(root, start=1, step=2).exposure, [[1.1, -0.01], [1.3, -0.03]])
+    assert open_sequence(_write_sequence(tmp_path / "plain")).exposure is None
+
+
 def test_reads_valid_sequence_lazily(tmp_path):
     seq = open_sequence(_write_sequence(tmp_path / "s", n=5))
     assert len(seq) == 5 and seq.window(1, 2).timestamps[0] == pytest.approx(10 + 1 / 30)
@@ -83,6 +94,9 @@ def test_reads_valid_sequence_lazily(tmp_path):
     (lambda r: (r / "rgb.txt").write_text("10.0 rgb/a.png\n10.0 rgb/b.png\n"), "rgb.txt:2: timestamp 10.000000 repeated"),
     (lambda r: (r / "rgb.txt").write_bytes((r / "rgb.txt").read_text().encode("utf-16")), "rgb.txt: not a UTF-8 text file \\(UTF-16"),
     (lambda r: sorted((r / "depth").iterdir())[1].unlink(), "depth.txt: 1 listed image\\(s\\) missing, first .*depth/"),
+    (lambda r: (r / "exposure.txt").write_text("10.000000 1.0 0.0\n10.033333 1.1\n"), "exposure.txt:2: expected at least 3 columns"),
+    (lambda r: (r / "exposure.txt").write_text("10.000000 1.0 0.0\n10.033333 1.1 x\n"), "exposure.txt: expected 2 numbers after the timestamp 10.033333"),
+    (lambda r: (r / "exposure.txt").write_text("10.000000 1.0 0.0\n"), "exposure.txt: no row for 2 colour frame\\(s\\), first at 10.033333"),
 ])
 def test_bad_input_is_named(tmp_path, breakage, message):
     root = _write_sequence(tmp_path / "seq")

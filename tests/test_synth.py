@@ -159,6 +159,8 @@ def test_exposure_scene_is_walking_xyz_under_the_gain_and_bias_it_writes(scene):
     exp, plain = open_sequence(scene("walking_exposure", 57)), open_sequence(scene("walking_xyz", 150))
     table = np.loadtxt(exp.root / "exposure.txt")
     assert np.allclose(table[:, 0], exp.timestamps)
+    assert np.array_equal(exp.exposure, table[:, 1:3]) and plain.exposure is None
+    assert np.array_equal(exp.window(10, 5, 2).exposure, table[10:20:2, 1:3])  # windowed with the frames
     gain, bias = table[:, 1], table[:, 2]
     changes = np.flatnonzero(np.diff(gain)) + 1
     assert gain[0] == 1.0 and bias[0] == 0.0 and len(changes) >= 4 and np.all(np.diff(changes) >= 10)

@@ -22,10 +22,11 @@ TUM_SCENES = (
     "static_xyz",
 )
 OBJECT_SCENES = ("walking_carry", "walking_push", "crowd")
-# walking_xyz's frames seen by a camera with automatic exposure (see generator.exposure_schedule)
-EXPOSURE_SCENES = ("walking_exposure",)
-SCENES = TUM_SCENES + OBJECT_SCENES + EXPOSURE_SCENES
-_PATTERN = {"walking_carry": "xyz", "walking_push": "halfsphere", "crowd": "xyz", "walking_exposure": "xyz"}
+# scenes seen by a camera with automatic exposure (see generator.exposure_schedule) -> the scene
+# whose camera path, people and objects they show
+EXPOSURE_SCENES = {"walking_exposure": "walking_xyz"}
+SCENES = TUM_SCENES + OBJECT_SCENES + tuple(EXPOSURE_SCENES)
+_PATTERN = {"walking_carry": "xyz", "walking_push": "halfsphere", "crowd": "xyz"}
 
 # object classes of the furniture (what an instance segmenter such as Mask R-CNN would label);
 # boxes of one object share its name
@@ -193,6 +194,7 @@ def furniture_names() -> list[str | None]:
 
 def people_for(scene: str) -> list[Person]:
     """The people of a named scene (none for static_*)."""
+    scene = EXPOSURE_SCENES.get(scene, scene)
     if scene == "walking_carry":
         return [  # one carries a board across the view, the other a box along the back
             Person("walk", (-1.9, 0.9, 0.0), 0.0, span=3.8, speed=0.75, phase=1.5, shirt="shirt_a", carry="board"),
@@ -331,4 +333,5 @@ def pattern_of(scene: str) -> str:
     """Camera motion pattern of a scene: the part after the last underscore of the TUM analogues."""
     if scene not in SCENES:
         raise ValueError(f"unknown synthetic scene {scene!r}: choose one of {', '.join(SCENES)}")
+    scene = EXPOSURE_SCENES.get(scene, scene)
     return _PATTERN.get(scene) or scene.rsplit("_", 1)[1]
