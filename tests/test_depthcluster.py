@@ -106,6 +106,21 @@ def test_outliers_flag_a_residual_block_and_grow_nothing_else():
     assert s.recall > 0.98 and s.precision > 0.98, s
 
 
+@pytest.mark.parametrize("n_take", [0, 3, 20])
+def test_region_and_block_lookups_equal_the_whole_image_gathers(n_take):
+    from dynslam_lite.depthcluster.clustering import select_components
+    from dynslam_lite.depthcluster.preremoval import _block_ids, _per_pixel
+
+    rng = np.random.default_rng(n_take)
+    comps = rng.integers(0, 40, (97, 131)).astype(np.int32)  # a size the blocks do not divide
+    take = np.zeros(40, bool)
+    take[rng.choice(40, n_take, replace=False)] = True
+    assert np.array_equal(select_components(comps, take), take[comps])
+    block = _block_ids(comps.shape, 6, 8)[0]
+    values = rng.random(48) > 0.5
+    assert np.array_equal(_per_pixel(values.reshape(6, 8), comps.shape), values[block])
+
+
 def test_release_gives_back_the_explained_floor_and_keeps_the_whole_person():
     d = _layers()  # wall at 3 m, table band at 2 m from row 70
     d[20:60, 60:90] = 1.5  # a person: a region of its own layer
@@ -212,6 +227,10 @@ def test_strided_residuals_are_the_residual_images_on_their_grid():
     grid = residuals(g0, d0, g1, d1, cam, T, step=SCORE_STEP)
     for f, g in zip(full, grid):
         assert np.array_equal(g, f[::SCORE_STEP, ::SCORE_STEP], equal_nan=True) and np.isfinite(g).mean() > 0.5
+    r_i, none_d = residuals(g0, d0, g1, d1, cam, T, depth=False)  # one of the two, as in the whole call
+    none_i, r_d = residuals(g0, d0, g1, d1, cam, T, intensity=False)
+    assert none_d is None and none_i is None
+    assert np.array_equal(r_i, full[0], equal_nan=True) and np.array_equal(r_d, full[1], equal_nan=True)
     valid = d0 > 0
     assert median_residual(grid[0], valid) == median_residual(full[0], valid) < 1e-3  # the true pose explains it
     off = residuals(g0, d0, g1, d1, cam, se3_exp([0.05, 0, 0, 0, 0, 0]) @ T, step=SCORE_STEP)[0]

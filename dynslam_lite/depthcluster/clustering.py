@@ -54,20 +54,19 @@ def fill_holes(depth: np.ndarray) -> np.ndarray:
     -------
     (H, W) float32
     """
-    img = depth.astype(np.float32)
-    holes = img <= 0
+    out = depth.astype(np.float32)  # a copy
+    holes = out <= 0
     if not holes.any():
-        return img.copy()
-    n, comp = cv2.connectedComponents(holes.astype(np.uint8), connectivity=4)
+        return out
+    n, comp = cv2.connectedComponents(holes.view(np.uint8), connectivity=4)
     # at a hole pixel: the lowest measured depth among its 4 neighbours (inf: none)
-    around = cv2.erode(np.where(holes, np.float32(np.inf), img), _CROSS,
-                       borderType=cv2.BORDER_CONSTANT, borderValue=float("inf"))
+    out[holes] = np.inf
+    around = cv2.erode(out, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=float("inf"))
     rim = holes & (around < np.inf)  # hole pixels next to a measured one (only they lower a level)
     level = np.full(n, np.inf, np.float32)
     np.minimum.at(level, comp[rim], around[rim])
     level[np.concatenate([comp[0], comp[-1], comp[:, 0], comp[:, -1]])] = 0.0  # open to the border
     level[~np.isfinite(level)] = 0.0
-    out = img.copy()
     out[holes] = level[comp[holes]]
     return out
 
@@ -220,9 +219,10 @@ def layer_components(clusters: DepthClusters, edge_tol_m: float = 0.05, edge_tol
     comp = np.zeros(z.shape, np.int32)
     offset = 0
     for layer in range(clusters.n):
-        m = ((clusters.labels == layer) & ~cut).astype(np.uint8)
-        n_cc, cc = cv2.connectedComponents(m, connectivity=8)
-        np.copyto(comp, cc + offset, where=cc > 0)
+        m = (clusters.labels == layer) & ~cut
+        n_cc, cc = cv2.connectedComponents(m.view(np.uint8), connectivity=8)
+        cc += offset
+        np.copyto(comp, cc, where=m)
         offset += n_cc - 1
     return comp, np.bincount(comp.ravel(), minlength=offset + 1)
 
@@ -234,4 +234,16 @@ def grow_to_components(seed: np.ndarray, components: np.ndarray, areas: np.ndarr
     hit = np.bincount(components[seed], minlength=areas.size)
     take = (hit >= min_overlap * np.maximum(areas, 1)) & (areas <= max_area)
     take[0] = False
-    return seed | take[components]
+    return seed | select_components(components, take)
+
+
+def select_components(components: np.ndarray, take: np.ndarray) -> np.ndarray:
+    """``take[components]``: (H, W) bool, the pixels of the regions whose ``take`` is True (a few
+    regions: one comparison each, cheaper than the whole image's gather)."""
+    ids = np.flatnonzero(take)
+    if ids.size > 8:
+        return take[components]
+    out = np.zeros(components.shape, bool)
+    for c in ids:
+        out |= components == c
+    return out

@@ -29,6 +29,12 @@ full resolution: 1.17x -> 1.07x opencv-odometry on the first 40 Bonn dev frames 
 lockstep), not the 1.0x asked for; ATE Bonn dev every frame / 2nd / 3rd / 4th 0.0911 / 0.0826 /
 0.1093 / 0.1259 -> 0.0929 / 0.0786 / 0.1010 / 0.1278 m, fr2/desk 0.0071 -> 0.0077, synthetic crowd
 0.0715 -> 0.0816, walking_xyz 0.0294 -> 0.0272 m: mixed, within a single run's spread.
+
+Measured and not adopted (2026-12-05, for speed, ATE RMSE Bonn dev every frame / 3rd, synthetic
+crowd): the pre-removal block statistics from every 2nd row and column (about 2 ms a frame),
+0.0911 / 0.1093 / 0.0715 -> 0.0914 / 0.1416 / 0.0802 m (a flipped block decision changes the
+pair); the updates on the half-resolution level only (``refine_levels`` 2), 0.0946 / 0.1068 /
+0.0820 m.
 """
 from __future__ import annotations
 
@@ -259,7 +265,8 @@ def estimate_pair(
         removed[:] = False
     shared = {} if shared is None else shared  # pyramids of the pair, built by the first alignment
     with stage("align_0"):
-        r = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_init, ~removed, cfg.dense, shared)
+        r = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_init, ~removed, cfg.dense, shared,
+                  validate=False)
     its: list[Iteration] = []
     if not r.ok:
         its.append(Iteration(r.T_cur_ref, removed, None, float("nan"), 0.0, False, r.reason))
@@ -276,7 +283,8 @@ def estimate_pair(
             its.append(Iteration(T, removed, None, float("nan"), static_fraction(removed), True, brightness=ab))
             break
         with stage(f"update_{k + 1}"):
-            last = _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples, ab)
+            last = _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples, ab,
+                              depth=cfg.outlier.depth_outliers)
             _, r_i, r_d, _ = last
             score = median_residual(r_i, valid) if cfg.select_margin > 0 else float("nan")
             out, tau = outliers(r_i, r_d, depth_ref, valid & ~removed, cfg.outlier, comps)
@@ -296,7 +304,8 @@ def estimate_pair(
             removed = new_removed
             break
         with stage(f"update_{k + 1}"):
-            rr = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, ~new_removed, refine, shared, ab)
+            rr = align(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, ~new_removed, refine, shared, ab,
+                       validate=False)
         if not rr.ok:
             its[-1].reason = f"update rejected: {rr.reason}"
             break
@@ -313,7 +322,7 @@ def estimate_pair(
         with stage("select"):
             def score(T_k: np.ndarray, ab_k) -> float:
                 r_k = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T_k, samples=samples,
-                                step=SCORE_STEP, brightness=ab_k)[0]
+                                step=SCORE_STEP, brightness=ab_k, depth=False)[0]
                 return median_residual(r_k, valid)
 
             for it in its:  # its[-1] is the last estimate T
@@ -331,18 +340,22 @@ def estimate_pair(
         with stage("release"):
             if last[0] is not T:  # the pose moved since the last residuals
                 last = _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples, ab)
+            elif last[2] is None:  # the updates read r_I only
+                r_d = residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, last[3], samples,
+                                intensity=False)[1]
+                last = (T, last[1], r_d, last[3])
             moving = release(removed, last[1], last[2], depth_ref, cfg.outlier,
                              comps if comps is not None else layer_components(clusters_ref))
     return PairResult(T, True, "", clusters_ref, pre, its, moving, removed, last[3] if last[0] is T else None,
                       chosen)
 
 
-def _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples, brightness=None) -> tuple:
+def _residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, samples, brightness=None, depth=True) -> tuple:
     """(T, r_I, r_D, warp): the whole residual images of the pose T (with the pair's
-    ``brightness``, see :func:`.background.residuals`) and its warp."""
+    ``brightness``; r_D None unless ``depth``, see :func:`.background.residuals`) and its warp."""
     warp = warp_coordinates(camera, depth_ref, T)
-    return (T, *residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp, samples, brightness=brightness),
-            warp)
+    return (T, *residuals(gray_ref, depth_ref, gray_cur, depth_cur, camera, T, warp, samples, brightness=brightness,
+                          depth=depth), warp)
 
 
 def propagate_mask(moving: np.ndarray, depth_ref: np.ndarray, camera: PinholeCamera,
@@ -383,32 +396,32 @@ class DepthClusterMethod(Method):
 
     def __init__(self, camera: PinholeCamera, config: DepthClusterConfig):
         self.camera, self.config = camera, config
-        self._cache: tuple[float, DepthClusters] | None = None
+        self._cache: tuple[float, np.ndarray, DepthClusters] | None = None  # the last frame's
         self._prior: tuple[float, np.ndarray] | None = None
         self._pyramids: tuple[float, tuple] | None = None  # the last current frame's, for the next pair
         self.iterations_used: list[int] = []
         self.replaced = 0  # pairs whose reported pose is not the last estimate (select_margin)
         self.area = np.zeros(3)  # sums over pairs of the removed fraction: pre-removal, final, pose
 
-    def _clusters(self, frame) -> DepthClusters:
+    def _prepare(self, frame) -> tuple[np.ndarray, DepthClusters]:
+        """The frame's intensity in [0, 1] and its depth layers, computed once per frame (the
+        current frame of one pair is the reference of the next)."""
         if self._cache is not None and self._cache[0] == frame.timestamp:
-            return self._cache[1]
-        c = _layers(frame.depth, self.config)
-        self._cache = (frame.timestamp, c)
-        return c
+            return self._cache[1:]
+        self._cache = (frame.timestamp, frame.gray.astype(np.float32) / 255.0, _layers(frame.depth, self.config))
+        return self._cache[1:]
 
     def track(self, ref, cur, T_init, timer) -> Tracked:
         with timer.stage("cluster"):
-            c_ref = self._clusters(ref)
-            c_cur = self._clusters(cur)
+            gray_ref, c_ref = self._prepare(ref)
+            gray_cur, c_cur = self._prepare(cur)
         prior = None
         if self._prior is not None and self._prior[0] == ref.timestamp:
             prior = self._prior[1]
         shared = {}
         if self._pyramids is not None and self._pyramids[0] == ref.timestamp:
             shared["ref_pyramids"] = self._pyramids[1]
-        res = estimate_pair(ref.gray.astype(np.float32) / 255.0, ref.depth,
-                            cur.gray.astype(np.float32) / 255.0, cur.depth, self.camera, T_init,
+        res = estimate_pair(gray_ref, ref.depth, gray_cur, cur.depth, self.camera, T_init,
                             self.config, c_ref, c_cur.filled, prior, timer=timer, shared=shared)
         if "pyramids" in shared:
             self._pyramids = (cur.timestamp, shared["pyramids"][2:])

@@ -178,6 +178,17 @@ def pre_remove(
     return PreRemoval(edge, depth_score, fraction_score, coef, dynamic, moving, scale, mask, shape)
 
 
+def _per_pixel(values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(rows, cols) per-block values spread over the (H, W) pixels of the blocks (the last row and
+    column of blocks take the remainder, as :func:`_block_ids`)."""
+    (rows, cols), (H, W) = values.shape, shape
+    reps_r = np.full(rows, H // rows)
+    reps_r[-1] += H - rows * (H // rows)
+    reps_c = np.full(cols, W // cols)
+    reps_c[-1] += W - cols * (W // cols)
+    return np.repeat(np.repeat(values, reps_r, axis=0), reps_c, axis=1)
+
+
 def _remove_regions(labels, block, dynamic, moving, cfg: PreRemovalConfig) -> np.ndarray:
     """Union of the largest connected region of the moving layer touching each dynamic block."""
     H, W = labels.shape
@@ -186,8 +197,8 @@ def _remove_regions(labels, block, dynamic, moving, cfg: PreRemovalConfig) -> np
         return mask
     limit = cfg.max_region_fraction * H * W
     near_dyn = cv2.dilate(dynamic.reshape(cfg.rows, cfg.cols).astype(np.uint8), np.ones((3, 3), np.uint8))
-    near_dyn_px = near_dyn.reshape(-1).astype(bool)[block]
-    px = np.flatnonzero(dynamic[block])  # the pixels of the dynamic blocks
+    near_dyn_px = _per_pixel(near_dyn.astype(bool), (H, W))
+    px = np.flatnonzero(_per_pixel(dynamic.reshape(cfg.rows, cfg.cols), (H, W)))  # the pixels of the dynamic blocks
     px_block = block.ravel()[px]
     px_layer = moving[px_block]
     for layer in np.unique(moving[dynamic]):

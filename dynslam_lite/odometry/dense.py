@@ -183,6 +183,7 @@ def align(
     config: DenseConfig | None = None,
     shared: dict | None = None,
     brightness: tuple[float, float] | None = None,
+    validate: bool = True,
 ) -> DenseResult:
     """Estimate ``T_cur_ref`` by coarse-to-fine Gauss-Newton on eq. 5.
 
@@ -198,14 +199,17 @@ def align(
         the reference frame's ``(image, depth)`` pyramids in it as ``"ref_pyramids"`` (the
         previous pair's current frame, ``shared["pyramids"][2:]``)
     brightness : initial (gain, bias) with ``config.affine_brightness`` ((1, 0) when None)
+    validate : False skips the checks of the images (a caller that has checked them and aligns
+        the same pair again)
     Returns
     -------
     DenseResult
     """
-    image01("gray_ref", gray_ref)
-    image01("gray_cur", gray_cur, gray_ref.shape)
-    check_depth("depth_ref", depth_ref, gray_ref.shape)
-    check_depth("depth_cur", depth_cur, gray_ref.shape)
+    if validate:
+        image01("gray_ref", gray_ref)
+        image01("gray_cur", gray_cur, gray_ref.shape)
+        check_depth("depth_ref", depth_ref, gray_ref.shape)
+        check_depth("depth_cur", depth_cur, gray_ref.shape)
     if mask_ref is not None:
         check_mask("mask_ref", mask_ref, gray_ref.shape)
     if T_init is not None:
