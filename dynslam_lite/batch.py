@@ -25,7 +25,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-
 from . import experiments, tables
 from .errors import BatchError, ConfigError, Interrupted
 from .download import ARCHIVES

@@ -117,6 +117,8 @@ def test_region_and_block_lookups_equal_the_whole_image_gathers(n_take):
     take[rng.choice(40, n_take, replace=False)] = True
     assert np.array_equal(select_components(comps, take), take[comps])
     block = _block_ids(comps.shape, 6, 8)[0]
+    r, c = np.minimum(np.arange(97) // (97 // 6), 5), np.minimum(np.arange(131) // (131 // 8), 7)
+    assert np.array_equal(block, r[:, None] * 8 + c[None, :])  # 16 x 16 blocks, the last ones larger
     values = rng.random(48) > 0.5
     assert np.array_equal(_per_pixel(values.reshape(6, 8), comps.shape), values[block])
 

@@ -100,11 +100,7 @@ class PreRemoval:
 @lru_cache(maxsize=4)
 def _block_ids(shape: tuple[int, int], rows: int, cols: int) -> tuple[np.ndarray, np.ndarray]:
     """Block index of every pixel (H, W) and the pixel count of every block."""
-    H, W = shape
-    bh, bw = H // rows, W // cols
-    r = np.minimum(np.arange(H) // bh, rows - 1)
-    c = np.minimum(np.arange(W) // bw, cols - 1)
-    ids = (r[:, None] * cols + c[None, :]).astype(np.int64)
+    ids = _per_pixel(np.arange(rows * cols, dtype=np.int64).reshape(rows, cols), shape)
     px = np.bincount(ids.ravel(), minlength=rows * cols).astype(float)
     ids.flags.writeable = px.flags.writeable = False
     return ids, px
@@ -179,8 +175,9 @@ def pre_remove(
 
 
 def _per_pixel(values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """(rows, cols) per-block values spread over the (H, W) pixels of the blocks (the last row and
-    column of blocks take the remainder, as :func:`_block_ids`)."""
+    """(rows, cols) per-block values spread over the (H, W) pixels of the blocks: ``H // rows`` x
+    ``W // cols`` pixels each, the last row and column of blocks taking the remainder (the block
+    layout; :func:`_block_ids` numbers the blocks with it)."""
     (rows, cols), (H, W) = values.shape, shape
     reps_r = np.full(rows, H // rows)
     reps_r[-1] += H - rows * (H // rows)
