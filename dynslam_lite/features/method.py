@@ -90,7 +90,8 @@ class FrontendMethod(Method):
         return self.tracker.trajectory()
 
     def extras(self) -> dict:
-        return {"keyframes": len(self.tracker.keyframes), "map_points": int(self.tracker.map.alive.sum())}
+        return {"keyframes": len(self.tracker.keyframes), "map_points": int(self.tracker.map.alive.sum()),
+                "support_reverted": self.tracker.reverted}
 
 
 class StaticORBMethod(FrontendMethod):
