@@ -208,11 +208,11 @@ def test_a_start_pose_already_refined_takes_one_narrow_search_and_one_pose_step(
 
 
 def test_a_pose_step_that_loses_its_matches_gives_way_to_the_prediction(scene):
-    """A pose step pulled away (here: displaced by 0.3 m, as a group of matches on a person the
-    masks miss pulls it, and held there by that group once the pose is off) finds few matches in
-    the narrow re-search; the frontend then tries the prediction's matches and keeps the pose
-    with more inliers (``support_check``). Off, the frame is lost: the displaced pose keeps too few
-    inliers (the pose falls back to the prediction and the frame is reported failed)."""
+    """A pose step pulled away (here: displaced by 0.1 m, and held there with every match an
+    inlier, as a group of matches on a person the masks miss holds it) finds only part of the
+    first search's matches in the narrow re-search; the frontend then tries the prediction's
+    matches and keeps the pose with more inliers (``support_check``). Off, the displaced pose is
+    accepted."""
     from dynslam_lite.features import FrontendConfig
 
     seq = open_sequence(scene("static_xyz", 150))
@@ -226,18 +226,19 @@ def test_a_pose_step_that_loses_its_matches_gives_way_to_the_prediction(scene):
 
         def pulled(*a, step=step, calls=calls, T_pred=T_pred):
             est = step(*a)
-            started_off = np.linalg.norm((a[-1] @ invert(T_pred))[:3, 3]) > 0.1
-            if not calls or started_off:  # the first pose step lands 0.3 m off and stays there
-                est.T_c_w = se3_exp(np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0])) @ est.T_c_w
+            started_off = np.linalg.norm((a[-1] @ invert(T_pred))[:3, 3]) > 0.05
+            if not calls or started_off:  # the first pose step lands 0.1 m off and stays there
+                est.T_c_w = se3_exp(np.array([0.1, 0.0, 0.0, 0.0, 0.0, 0.0])) @ est.T_c_w
+                est.inliers[:] = True
             calls.append(1)
             return est
 
         tr.estimate = pulled
     with_check, without = (tr.process(seq[7]) for tr in trackers)
     truth = invert(gt[7]) @ gt[0]  # world = the first camera
-    assert with_check.ok and trackers[0].reverted == 1
-    assert np.linalg.norm((trackers[0].T_last @ invert(truth))[:3, 3]) < 0.005
-    assert not without.ok and "inlier" in without.reason and trackers[1].reverted == 0
+    errors = [np.linalg.norm((tr.T_last @ invert(truth))[:3, 3]) for tr in trackers]
+    assert with_check.ok and without.ok and trackers[0].reverted == 1 and trackers[1].reverted == 0
+    assert errors[0] < 0.005 and errors[1] > 0.05, errors
 
 
 def test_the_screening_keeps_a_person_the_masks_miss_out_of_the_map(scene):
