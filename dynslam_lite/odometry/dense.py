@@ -54,6 +54,16 @@ class DenseConfig:
         0.099 at 1 (its background update reads the photometric residuals); weights from each
         pair's residual spread (1.4826 MAD) instead of lambda and the Huber constants: 0.279 m.
         Not changed: a value picked on the one real dev clip would be tuned to it.
+        Why the photometric term is weak there (2026-12-06, same masks, frame to frame, with
+        ``affine_brightness``): photometric only 0.323 m, depth only 0.086 m. Started at the true
+        relative pose, the photometric minimum lies on average 5.9 mm per frame off along x (std
+        14 mm), the depth minimum 1.3 mm: a bias that accumulates, not noise. Not the lens
+        distortion (the dataset's published k1, k2, p1, p2 undone on colour and depth: 0.326 m),
+        not the registration of depth to colour (shifted by 2 px: 0.317-0.362 m), not vignetting
+        (a radial gain of 20-50 % changes nothing), not outliers (Student-t weights, nu = 5, as
+        DVO: 0.326 m), not the resolution (full: 0.318 m); leaving out a 10 % image border gives
+        0.190 m. Cause not found (candidates: rolling shutter, the 7-11 ms between the colour and
+        depth timestamps)
     huber_intensity : Huber threshold of the photometric residual (intensity units)
     huber_depth_m : Huber threshold of the depth residual (metres)
     min_depth_m, max_depth_m : reference pixels used
