@@ -86,17 +86,17 @@ class FrontendConfig:
     support_check : when the narrow search at the optimised pose finds fewer than this fraction of
         the first search's matches and the pose keeps at least ``min_inliers`` inliers (so it
         would be accepted), a second pose from the prediction's matches in the narrow window
-        competes, and the pose with more inliers is kept (ours; 0 = off, ORB-SLAM2's tracking;
-        a pose with fewer inliers is a reported failure either way: acting there too turned a
-        reported failure on synthetic crowd with ``oracle:all`` into a pose 0.23 m off, ATE
-        0.0186 -> 0.0257 m). Where people cover most of the image, a few dozen matches are left and a
-        group of them on a person the masks miss can pull the pose step away; the re-search at
-        that pose then finds only the group. Measured (2026-12-06): bgrestore on the Bonn dev
-        clip with the removed instances dilated by 15 px, frame 80 (people on 60 % of the image):
-        54 matches around the prediction, the pose step moved 0.66 m and its re-search kept 24
-        (the prediction's matches: 38 inliers, 5 cm from the truth);
-        ATE 0.307 m without the check, 0.019 m with it. In the whole reproduction (279 runs) it
-        acted in that run only; every other run is unchanged
+        competes, and the pose with more inliers is kept (ours; 0 = off, ORB-SLAM2's tracking).
+        Where people cover most of the image, a few dozen matches are left and a group of them
+        on a person the masks miss can pull the pose step away; the re-search at that pose then
+        finds only the group. Measured (2026-12-06): bgrestore on the Bonn dev clip with the
+        removed instances dilated by 15 px, frame 80 (people on 60 % of the image): 54 matches
+        around the prediction, the pose step moved 0.66 m and its re-search kept 24 (the
+        prediction's matches: 38 inliers, 5 cm from the truth); ATE 0.307 m without the check,
+        0.019 m with it. A pose below ``min_inliers`` is a reported failure either way: acting
+        there too turned a reported failure on synthetic crowd with ``oracle:all`` into a pose
+        0.23 m off (ATE 0.0186 -> 0.0257 m). In the whole reproduction (279 runs) it acts in
+        that Bonn run only; every other run is unchanged
     """
 
     orb: ORBConfig = field(default_factory=ORBConfig)
