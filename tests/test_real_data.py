@@ -59,7 +59,7 @@ def test_person_masks_beat_no_masks_and_the_baselines_on_bonn_crowd(bonn_runs, r
 
 
 def test_bgrestore_keeps_the_pose_when_few_measured_points_are_left_on_bonn_crowd(bonn_runs):
-    """Removed instances dilated by 15 px instead of 10 (``bgrestore[dilate=15]``) leave 24-60
+    """Removed instances dilated by 15 px instead of 10 (``E.BG_WIDE``) leave 24-60
     measured matches in frames 74-86, where people cover 60 % of the image; at frame 80 the pose
     step moved 0.66 m away and its narrow re-search kept 24 of 54 matches. The frontend's
     ``support_check`` then keeps the prediction's matches (without it: ATE 0.31 m, two jumps of
