@@ -288,7 +288,8 @@ def warp_coordinates(
         Y *= np.float32(camera.fy)
         Y /= Z
         Y += np.float32(camera.cy)
-    X[invalid] = Y[invalid] = Z[invalid] = np.nan
+    for a in (X, Y, Z):
+        np.copyto(a, np.float32(np.nan), where=invalid)
     return X, Y, Z
 
 

@@ -142,3 +142,23 @@ def test_dense_affine_brightness_recovers_the_pose_and_the_exposure_change():
     intensity = np.array([0.1, 0.4, 0.7])  # gain and bias trade off; the map they give is what counts
     assert np.abs(a * intensity + b - (1.06 * intensity + 0.02)).max() < 0.005
     assert err[True] < 0.6e-3 and err[False] > 2 * err[True], err
+
+
+def test_dense_alignments_sharing_a_pair_dict_equal_fresh_ones():
+    """``shared`` keeps a pair's pyramids and reference points between alignments (paper A aligns
+    each pair several times with different masks): every result equals a fresh call's."""
+    r = SceneRenderer("static_xyz", 0)
+    g0, d0 = _clean_frame(r, r.pose(0.0))
+    g1, d1 = _clean_frame(r, r.pose(0.0) @ invert(se3_exp([0.01, 0.0, -0.01, 0.0, 0.01, 0.0])))
+    left = np.zeros(d0.shape, bool)
+    left[:, : d0.shape[1] // 2] = True
+    calls = [(None, DenseConfig()), (~left, DenseConfig()), (left, DenseConfig(levels=3)),
+             (left, DenseConfig(min_gradient=0.02)), (~left, DenseConfig(max_depth_m=3.0))]
+    shared: dict = {}
+    for mask, cfg in calls:
+        a = align(g0, d0, g1, d1, r.camera, mask_ref=mask, config=cfg, shared=shared)
+        b = align(g0, d0, g1, d1, r.camera, mask_ref=mask, config=cfg)
+        assert a.ok and np.array_equal(a.T_cur_ref, b.T_cur_ref) and a.valid_pixels == b.valid_pixels
+    # the masks select different pixels: the cache must not return the first call's points
+    assert align(g0, d0, g1, d1, r.camera, mask_ref=left, shared=shared).valid_pixels < \
+        align(g0, d0, g1, d1, r.camera, shared=shared).valid_pixels

@@ -91,7 +91,7 @@ def residuals(
     # one channel each: a 2-channel remap rounds the position to 1/32 pixel)
     if samples is None:
         samples = current_samples(gray_cur, depth_cur)
-    mu, mv = np.where(outside, np.float32(-1), mu), np.where(outside, np.float32(-1), mv)
+    # NaN or far positions sample the replicated border; those pixels are set to NaN below
     i, d = (cv2.remap(c, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) if wanted else None
             for c, wanted in zip(samples, (intensity, depth)))
     if i is not None:
@@ -99,11 +99,11 @@ def residuals(
             i -= gray_ref  # in place: r_I
         else:
             i -= np.float32(brightness[0]) * gray_ref + np.float32(brightness[1])
-        i[outside] = np.nan
+        np.copyto(i, np.float32(np.nan), where=outside)
     if d is not None:
         no_depth = outside | (d <= 0)
         d -= z  # r_D
-        d[no_depth] = np.nan
+        np.copyto(d, np.float32(np.nan), where=no_depth)
     return i, d
 
 

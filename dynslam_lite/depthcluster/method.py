@@ -35,6 +35,16 @@ crowd): the pre-removal block statistics from every 2nd row and column (about 2 
 0.0911 / 0.1093 / 0.0715 -> 0.0914 / 0.1416 / 0.0802 m (a flipped block decision changes the
 pair); the updates on the half-resolution level only (``refine_levels`` 2), 0.0946 / 0.1068 /
 0.0820 m.
+
+Measured and not adopted (2026-12-07, for speed, ATE RMSE Bonn dev every frame / 2nd / 3rd,
+synthetic crowd, walking_xyz, walking_halfsphere; today 0.0911 / 0.0818 / 0.0792 / 0.0535 /
+0.0198 / 0.0153 m): an earlier stop of the updates (``stable_fraction`` 0.005: 0.0930 / 0.0816 /
+0.0799 / 0.1149 / 0.0198 / 0.0153; 0.01: 0.0953 / 0.0808 / 0.0798 / 0.1278 / 0.0198 / 0.0152);
+each Gauss-Newton level stopped once an accepted step lowers the cost by less than a fraction
+of it (a fifth of the levels end with a step that raises it and is undone): 1e-3, 13-17 % fewer
+cost evaluations, 0.0912 / 0.0822 / 0.1153 / 0.1126 / 0.0198 / 0.0151; 1e-4, 5-8 % fewer,
+0.0911 / 0.0816 / 0.0799 / 0.0585 / 0.0197 / 0.0152 m, and 1.16x / 1.15-1.16x opencv-odometry
+against 1.16-1.21x without (60 Bonn dev frames, two 3-round bench runs each): within the spread.
 """
 from __future__ import annotations
 

@@ -204,10 +204,10 @@ def align(
     T_init : (4, 4) initial guess of T_cur_ref (identity when None)
     mask_ref : (H, W) bool, reference pixels allowed in the sums (static background); all if None
     shared : a dict kept by the caller between alignments of the same frame pair (paper A aligns
-        each pair several times, with different masks): the pyramids and the current frame's
-        gradients are built once, by the first call. A caller that tracks frame by frame may put
-        the reference frame's ``(image, depth)`` pyramids in it as ``"ref_pyramids"`` (the
-        previous pair's current frame, ``shared["pyramids"][2:]``)
+        each pair several times, with different masks): the pyramids, the current frame's
+        gradients and each level's reference points (before the mask) are built once. A caller
+        that tracks frame by frame may put the reference frame's ``(image, depth)`` pyramids in
+        it as ``"ref_pyramids"`` (the previous pair's current frame, ``shared["pyramids"][2:]``)
     brightness : initial (gain, bias) with ``config.affine_brightness`` ((1, 0) when None)
     validate : False skips the checks of the images (a caller that has checked them and aligns
         the same pair again)
@@ -249,17 +249,21 @@ def align(
             shared["current", level] = _Level(gcur[level], dcur[level], cam)
         cur = shared["current", level]
         z = dref[level]
-        sel = (z > cfg.min_depth_m) & (z < cfg.max_depth_m)
+        key = ("reference", level, cfg.min_depth_m, cfg.max_depth_m, cfg.min_gradient)
+        if key not in shared:  # the reference points of the pair, before the mask: built once
+            sel = (z > cfg.min_depth_m) & (z < cfg.max_depth_m)
+            if cfg.min_gradient > 0:
+                g = gref[level]
+                mag = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=1), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=1)) * 0.5
+                sel &= mag >= cfg.min_gradient
+            v, u = np.nonzero(sel)
+            zs = z[v, u]
+            shared[key] = (v, u, np.stack([(u - cam.cx) / cam.fx * zs, (v - cam.cy) / cam.fy * zs, zs]).astype(np.float32),
+                           gref[level][v, u])
+        v, u, P_ref, I_ref = shared[key]
         if mref is not None:
-            sel &= mref[level] > 0.999  # all fine pixels of the block are static
-        if cfg.min_gradient > 0:
-            g = gref[level]
-            mag = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=1), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=1)) * 0.5
-            sel &= mag >= cfg.min_gradient
-        v, u = np.nonzero(sel)
-        zs = z[v, u]
-        P_ref = np.stack([(u - cam.cx) / cam.fx * zs, (v - cam.cy) / cam.fy * zs, zs]).astype(np.float32)
-        I_ref = gref[level][v, u]
+            keep = np.flatnonzero(mref[level][v, u] > 0.999)  # all fine pixels of the block are static
+            P_ref, I_ref = np.take(P_ref, keep, axis=1), np.take(I_ref, keep)
         costs: list[float] = []
         min_valid = max(50, int(cfg.min_valid_fraction * z.size))
         prev_cost = np.inf
@@ -310,10 +314,11 @@ def align(
             if affine:  # d r_I / d(a, b) = (-I_A, -1): two more rows of the photometric Jacobian
                 J_ab = np.stack([-I_A, np.full(idx.size, -1.0, np.float32)])
                 JwA = J_ab * w_I
-                H = np.block([[H, JwI @ J_ab.T], [JwA @ J_I.T, JwA @ J_ab.T]])
+                H6, H = H, np.empty((8, 8))
+                H[:6, :6], H[:6, 6:], H[6:, :6], H[6:, 6:] = H6, JwI @ J_ab.T, JwA @ J_I.T, JwA @ J_ab.T
                 b = np.concatenate([b, JwA @ r_I])
             try:
-                delta = -np.linalg.solve(H.astype(float), b.astype(float))
+                delta = -np.linalg.solve(H.astype(float, copy=False), b.astype(float))
             except np.linalg.LinAlgError:
                 return DenseResult(T, False, "singular normal equations", idx.size, history + [costs], tuple(ab))
             T_prev, ab_prev = T, ab
