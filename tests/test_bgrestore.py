@@ -1,6 +1,8 @@
 """Paper C: 3-class Otsu against brute force, region growing and depth filling against hand
 computation, the eq. 8 splat, instance removal on constructed matches, restoration against the
 true background, and the method on a synthetic walking clip."""
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -203,6 +205,29 @@ def test_views_take_the_newest_keyframes_that_reach_a_pixel():
     assert common.sum() > 1000
     np.testing.assert_allclose(both.rgb[common].mean(axis=0), [100, 100, 0], atol=1)
     np.testing.assert_allclose(newest.rgb[common].mean(axis=0), [200, 0, 0], atol=1)
+
+
+def test_keyframes_reused_at_other_poses_restore_as_fresh_ones():
+    """The coarse samples a keyframe caches hold for any pose: a keyframe used at one pose and
+    then, through ``dataclasses.replace``, at a refined one restores exactly as a fresh one."""
+    r = SceneRenderer("walking_xyz", 0)
+    t, _ = _timestamps(40, 0)
+    kfs = []
+    for i in (0, 15, 30):
+        rgb, d, m, _ = r.frame(i, t[i] - T0)
+        kfs.append(KeyframeImage(rgb, d, r.pose(t[i] - T0), m))
+    rgb, depth, hole, _ = r.frame(38, t[38] - T0)
+    T = r.pose(t[38] - T0)
+    nudge = se3_exp(np.array([0.15, -0.05, 0.1, 0.0, 0.12, 0.0]))  # far enough that stale samples would miss
+    restore_from_keyframes(r.camera, rgb, depth, hole, T, kfs, views=1)  # fills the caches
+    assert all(kf.cache for kf in kfs)
+    moved = [replace(kf, T_w_c=nudge @ kf.T_w_c) for kf in kfs]
+    fresh = [KeyframeImage(kf.rgb, kf.depth, kf.T_w_c, kf.invalid) for kf in moved]
+    a = restore_from_keyframes(r.camera, rgb, depth, hole, T, moved, views=1)
+    b = restore_from_keyframes(r.camera, rgb, depth, hole, T, fresh, views=1)
+    assert moved[0].cache is kfs[0].cache and a.filled.sum() > 1000
+    for f in ("rgb", "depth", "weight", "filled"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
 
 
 @pytest.mark.slow

@@ -251,13 +251,14 @@ def _fill_layers(out: np.ndarray, todo: np.ndarray, layer: np.ndarray) -> None:
     front = np.flatnonzero(np.pad(layer, 1).ravel())
     slots = np.empty((H + 2) * Wp, np.int64)  # scratch: each target pixel's slot in the next front
     while front.size:
-        target = front[None, :] + shifts[:, None]  # (8, n): each neighbour of each front pixel
+        target = (front[None, :] + shifts[:, None]).ravel()  # each neighbour of each front pixel, shift by shift
         keep = open_[target]
-        target = target[keep]
+        target = np.compress(keep, target)  # np.compress: faster than boolean indexing
         if not target.size:
             break
-        # the value of the front pixel each entry comes from, without tiling the front
-        src = np.broadcast_to(values[front], keep.shape)[keep].astype(np.float64)
+        from_ = np.empty((len(shifts), front.size))  # the value of the front pixel each entry comes from
+        from_[:] = values[front]
+        src = np.compress(keep, from_)
         # np.unique(target, return_inverse=True) without sorting every entry: the one entry of
         # each pixel that the scatter kept marks it, only the distinct pixels are sorted
         entry = np.arange(target.size)

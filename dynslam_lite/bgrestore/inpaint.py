@@ -20,12 +20,13 @@ paper's F -> E -> (R, t) route beside it.
 
 Vectorised: the projection of every keyframe pixel is one matrix product, the splat is one
 ``np.bincount`` per channel over the four corners of every point, into the hole's pixels only; a
-coarse pass on every 4th pixel first finds the part of each keyframe's blocks that can land in
-the hole, so only those are projected at full resolution.
+coarse pass on every 4th pixel (back-projected once per keyframe, ``KeyframeImage.cache``) first
+finds the part of each keyframe's blocks that can land in the hole, so only those are projected at
+full resolution.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import cv2
@@ -44,12 +45,15 @@ class KeyframeImage:
     rgb : (H, W, 3) uint8, restored colour; depth : (H, W) float32 metres, restored depth
     T_w_c : (4, 4) camera-to-world pose
     invalid : (H, W) bool, pixels not to be used (the people of that keyframe, see ``method.py``)
+    cache : what the restoration computes once per keyframe, whatever its pose (the coarse
+        samples back-projected); ``dataclasses.replace`` with a refined pose shares it
     """
 
     rgb: np.ndarray
     depth: np.ndarray
     T_w_c: np.ndarray
     invalid: np.ndarray
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
 
 @dataclass
@@ -80,6 +84,26 @@ def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, use
     """Keyframe pixels with depth, outside ``kf.invalid`` (and inside ``use`` where given), every
     ``step``-th row and column, moved into the current camera: (x, y, depth there, flat index
     ``v * W + u`` of the keyframe pixel), in row-major order of the keyframe pixels."""
+    if use is None:  # the same samples at every pose: back-projected once per keyframe
+        key = ("samples", step, camera)
+        if key not in kf.cache:
+            kf.cache[key] = _backproject(camera, kf, None, step)
+        P, index = kf.cache[key]
+    else:
+        P, index = _backproject(camera, kf, use, step)
+    Pc = P @ T_cur_kf[:3, :3].T.astype(np.float32)
+    Pc += T_cur_kf[:3, 3].astype(np.float32)
+    front = Pc[:, 2] > 0.05
+    if not front.all():
+        Pc, index = np.compress(front, Pc, axis=0), np.compress(front, index)
+    x = camera.fx * Pc[:, 0] / Pc[:, 2] + camera.cx
+    y = camera.fy * Pc[:, 1] / Pc[:, 2] + camera.cy
+    return x, y, Pc[:, 2], index
+
+
+def _backproject(camera: PinholeCamera, kf: KeyframeImage, use: np.ndarray | None, step: int):
+    """The keyframe pixels of :func:`_project` in the keyframe's camera: (P (N, 3) float32, flat
+    index ``v * W + u``)."""
     H, W = kf.depth.shape
     r0 = 0
     if use is None:
@@ -88,8 +112,7 @@ def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, use
     else:  # only the rows of ``use`` are searched (the same pixels, in the same order)
         rows = np.flatnonzero(use.any(axis=1))
         if not rows.size:
-            none = np.zeros(0, np.float32)
-            return none, none, none, none.astype(np.int64)
+            return np.zeros((0, 3), np.float32), np.zeros(0, np.int64)
         r0, r1 = rows[0], rows[-1] + 1
         z = kf.depth[r0:r1]
         ok = (z > 0) & ~kf.invalid[r0:r1] & use[r0:r1]
@@ -103,15 +126,7 @@ def _project(camera: PinholeCamera, kf: KeyframeImage, T_cur_kf: np.ndarray, use
     P[:, 0] = _ray_factor(W, camera.cx, camera.fx)[u] * z
     P[:, 1] = _ray_factor(H, camera.cy, camera.fy)[v] * z
     P[:, 2] = z
-    Pc = P @ T_cur_kf[:3, :3].T.astype(np.float32)
-    Pc += T_cur_kf[:3, 3].astype(np.float32)
-    index = v * W + u
-    front = Pc[:, 2] > 0.05
-    if not front.all():
-        Pc, index = Pc[front], index[front]
-    x = camera.fx * Pc[:, 0] / Pc[:, 2] + camera.cx
-    y = camera.fy * Pc[:, 1] / Pc[:, 2] + camera.cy
-    return x, y, Pc[:, 2], index
+    return P, v * W + u
 
 
 @lru_cache(maxsize=8)
@@ -173,7 +188,7 @@ def _splat_hole(x, y, values, box, crop):
     W2 = c1 - c0 + 2  # the box padded by one pixel
     inside = _touches_box(x, y, box)
     if not inside.all():
-        x, y, values = x[inside], y[inside], values[:, inside]
+        x, y, values = np.compress(inside, x), np.compress(inside, y), np.compress(inside, values, axis=1)
     x0, y0 = np.floor(x), np.floor(y)
     xl, yl = x0.astype(np.int64) - (c0 - 1), y0.astype(np.int64) - (r0 - 1)  # padded-box coordinates
     fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
@@ -193,8 +208,10 @@ def _splat_hole(x, y, values, box, crop):
     np.multiply(fx, fy, out=w4[3])
     wt = w4.reshape(-1)
     acc = np.empty((len(values), n))
+    wc = np.empty(w4.shape)  # one buffer for the channels: each product rounded to float32, then summed in float64
     for c, channel in enumerate(values):
-        acc[c] = np.bincount(k, (w4 * channel).reshape(-1), n + 1)[:n]
+        np.multiply(w4, channel, out=wc, dtype=np.float32)
+        acc[c] = np.bincount(k, wc.reshape(-1), n + 1)[:n]
     return acc, np.bincount(k, wt, n + 1)[:n]
 
 
@@ -269,18 +286,21 @@ def restore_from_keyframes(camera: PinholeCamera, rgb: np.ndarray, depth: np.nda
         zmin = np.full(H * W, np.inf, np.float32)
         np.minimum.at(zmin, pix, vals[3])
         near = (vals[3] <= zmin[pix] * (1.0 + depth_tolerance)) & _touches_box(x, y, box)
-        if not near.all():
-            x, y, vals = x[near], y[near], vals[:, near]
+        if not near.all():  # np.compress: a few times faster than boolean indexing here
+            x, y, vals = np.compress(near, x), np.compress(near, y), np.compress(near, vals, axis=1)
         r0, r1, c0, c1 = box
         crop = hole[r0:r1, c0:c1]
         acc, ws = _splat_hole(x, y, vals, box, crop)
-        v, u = np.nonzero(crop)
-        at = (v + r0) * W + (u + c0)  # the hole pixels, row-major
-        wsum.ravel()[at] = ws
+        wsum[r0:r1, c0:c1][crop] = ws  # the hole pixels, row-major
         ok = ws >= min_weight
-        at = at[ok]
-        filled.ravel()[at] = True
-        norm = acc[:, ok] / ws[ok]
-        out_rgb.reshape(-1, 3)[at] = np.clip(np.rint(norm[:3].T), 0, 255).astype(np.uint8)
-        out_depth.ravel()[at] = norm[3].astype(depth.dtype)
+        done = filled[r0:r1, c0:c1]
+        done[crop] = ok
+        ws = np.compress(ok, ws)
+        for c in range(4):  # channel by channel: boolean assignment of rows is slow
+            norm = np.compress(ok, acc[c]) / ws
+            if c < 3:
+                np.clip(np.rint(norm, out=norm), 0, 255, out=norm)
+                out_rgb[r0:r1, c0:c1, c][done] = norm
+            else:
+                out_depth[r0:r1, c0:c1][done] = norm
     return Restoration(out_rgb, out_depth, wsum, filled)

@@ -128,13 +128,13 @@ class BgRestoreMethod(FrontendMethod):
         self.config = config
         self.camera = camera
         self.past_feats: deque = deque(maxlen=max(config.removal.frame_gap, 1))
-        self.kf_images: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.kf_images: dict[int, KeyframeImage] = {}  # by keyframe id, posed when used
         self.area = np.zeros(3)  # removed, restored, grown pixels over the run
 
     def _keyframe_images(self) -> list[KeyframeImage]:
         kfs = self.tracker.keyframes
         ids = [k for k in range(max(0, len(kfs) - self.config.keyframes), len(kfs)) if k in self.kf_images]
-        return [KeyframeImage(*self.kf_images[k][:2], invert(kfs[k].T_c_w), self.kf_images[k][2]) for k in ids]
+        return [replace(self.kf_images[k], T_w_c=invert(kfs[k].T_c_w)) for k in ids]
 
     def prepare(self, frame, instances, timer):
         """Steps 1-3: remove, restore from keyframes, grow depth; the frontend then tracks the
@@ -190,7 +190,7 @@ class BgRestoreMethod(FrontendMethod):
             n = len(self.tracker.keyframes)
             people = union(instances)
             lent = left if people is None else left | dilate(people, self.config.removal.dilate_px)
-            self.kf_images[n - 1] = (rec.rgb, rec.depth, lent)
+            self.kf_images[n - 1] = KeyframeImage(rec.rgb, rec.depth, np.eye(4), lent)
             for k in [k for k in self.kf_images if k < n - self.config.keyframes]:  # only the latest are used
                 del self.kf_images[k]
         self.area += [rec.removal.mask.sum(), rec.restored.sum(), rec.grown.sum()]
