@@ -13,8 +13,10 @@ import json
 import math
 import os
 import tempfile
+import time
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any, Callable
 
 import cv2
 import numpy as np
@@ -309,6 +311,8 @@ class Frame:
     mask : (H, W) bool or None, ground-truth moving objects (synthetic sequences only)
     instances : (H, W) uint8 or None, ground-truth object instance ids (0 = no object)
     classes : {instance id: class name} of ``instances`` ('person', 'chair', 'board', ...)
+    derived : what :meth:`derive` keeps, or None (the default: nothing kept). Not copied by
+        ``dataclasses.replace``: a frame with other pixels (a restored image) starts without it
     """
 
     index: int
@@ -318,11 +322,65 @@ class Frame:
     mask: np.ndarray | None = None
     instances: np.ndarray | None = None
     classes: dict[int, str] | None = None
+    derived: Derived | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def gray(self) -> np.ndarray:
         """(H, W) uint8 intensity."""
         return cv2.cvtColor(self.rgb, cv2.COLOR_RGB2GRAY)
+
+    def derive(self, key: tuple, make: Callable[[], Any]) -> tuple[Any, float]:
+        """``make()``, made once per frame where the frame keeps what is derived from it
+        (``derived``: :class:`KeptSequence`, whose frames the batch's runs of a sequence share,
+        while its budget lasts) and each time otherwise. ``make`` must be a function of the
+        sequence's frames and of what ``key`` names (settings, mask source, the other frame),
+        never of a run's state. Returns the value and, when it was made by an earlier call, the
+        milliseconds that took (else 0.0): the caller adds them to its stage, so a run's ms/frame
+        is what the method costs on its own. The value is shared: its arrays are made read-only."""
+        if self.derived is not None and key in self.derived:
+            return self.derived[key]
+        t = time.perf_counter()
+        value = _read_only(make())
+        if self.derived is not None:
+            self.derived.keep(key, value, (time.perf_counter() - t) * 1000.0)
+        return value, 0.0
+
+
+class Derived(dict):
+    """What runs derived from one kept frame, {key: (value, ms to make)}; the frames of a
+    sequence share one byte budget (``budget[0]``: bytes left), past which nothing more is kept."""
+
+    def __init__(self, budget: list[int]):
+        super().__init__()
+        self.budget = budget
+
+    def keep(self, key: tuple, value: Any, ms: float) -> None:
+        size = _nbytes(value)
+        if size <= self.budget[0]:
+            self.budget[0] -= size
+            self[key] = (value, ms)
+
+
+def _arrays(value: Any):
+    """The arrays in ``value`` (an array, or lists, tuples and objects holding them)."""
+    if isinstance(value, np.ndarray):
+        yield value
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            yield from _arrays(v)
+    elif hasattr(value, "__dict__"):
+        for v in vars(value).values():
+            yield from _arrays(v)
+
+
+def _nbytes(value: Any) -> int:
+    return sum(a.nbytes for a in _arrays(value))
+
+
+def _read_only(value: Any) -> Any:
+    for a in _arrays(value):
+        a.setflags(write=False)
+    return value
 
 
 def camera_from_name(name: str) -> PinholeCamera:
@@ -477,12 +535,15 @@ class RGBDSequence:
 
 class KeptSequence(RGBDSequence):
     """A sequence whose frames stay in memory once read, read-only, up to ``budget_bytes``
-    (the first frames read; the rest are decoded each time). The batch keeps the last sequence
-    a worker tracked, so the runs of one sequence decode its PNGs once per worker."""
+    (the first frames read; the rest are decoded each time), with what runs derive from them
+    (:meth:`Frame.derive`: ORB keypoints, masks, depth layers, paper A's pre-removal, paper C's
+    removal) up to ``derived_bytes``. The batch keeps the last sequence a worker tracked, so the
+    runs of one sequence decode its PNGs and derive those once per worker."""
 
-    def __init__(self, seq: RGBDSequence, budget_bytes: int = 1 << 30):
+    def __init__(self, seq: RGBDSequence, budget_bytes: int = 1 << 30, derived_bytes: int = 1 << 30):
         super().__init__(**{f.name: getattr(seq, f.name) for f in fields(seq)})
         self.budget_bytes = budget_bytes
+        self.derived_left = [derived_bytes]  # shared by the frames' Derived
         self._kept: dict[int, Frame] = {}
         self._bytes = 0
 
@@ -495,6 +556,7 @@ class KeptSequence(RGBDSequence):
         if self._bytes + size <= self.budget_bytes:
             for a in arrays:
                 a.setflags(write=False)  # shared by every run: a method must not write into it
+            frame.derived = Derived(self.derived_left)  # and what the runs derive from it
             self._kept[i % len(self)] = frame
             self._bytes += size
         return frame

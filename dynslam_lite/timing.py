@@ -19,3 +19,7 @@ class StageTimer:
             yield
         finally:
             self.frame[name] += (time.perf_counter() - t) * 1000.0
+
+    def add(self, name: str, ms: float) -> None:
+        """Charge ``ms`` to a stage: work of this frame done earlier and kept (:meth:`Frame.derive`)."""
+        self.frame[name] += ms

@@ -152,3 +152,42 @@ def test_bonn_conversion_is_rigid_and_applied():
     raw = read_trajectory(BONN_CROWD / "groundtruth.txt")
     assert seq.camera.name == "bonn"
     assert np.allclose(seq.groundtruth.poses, raw.poses @ T)
+
+
+def test_kept_frames_share_what_runs_derive_and_runs_on_them_equal_fresh_ones(scene):
+    """The batch's runs of a sequence share each kept frame's ORB keypoints, masks, depth layers,
+    paper A's pre-removal and paper C's removal (Frame.derive): runs with other settings on the same kept frames must still equal
+    runs on freshly read frames, and a frame with other pixels must not inherit them."""
+    from dataclasses import replace
+
+    from dynslam_lite.io import KeptSequence
+    from dynslam_lite.pipeline import run_method
+
+    path = scene("walking_carry", 12)
+    kept = KeptSequence(open_sequence(path))
+    runs = [("bgrestore", {"frontend.orb.n_features": 600}, "oracle"), ("bgrestore", None, "oracle"),
+            ("bgrestore", {"removal.frame_gap": 2}, "oracle"), ("bgrestore", {"restore": False}, "oracle"),
+            ("weightedstatic", None, "oracle:all"), ("depthcluster", {"max_edge_run": 4}, "none"),
+            ("depthcluster", {"preremoval.threshold": 0.2}, "none"), ("depthcluster", None, "none")]
+    for method, params, masks in runs:
+        shared = run_method(method, kept, params, masks=masks).trajectory.poses
+        fresh = run_method(method, open_sequence(path), params, masks=masks).trajectory.poses
+        assert np.array_equal(shared, fresh), (method, params, masks)
+    frame = kept[3]
+    assert {k[0] for k in frame.derived} == {"orb", "masks", "depth_layers", "removal", "preremoval"}
+    assert len([k for k in frame.derived if k[0] == "orb"]) == 2  # one per ORB setting
+    assert 0 < kept.derived_left[0] < 1 << 30  # what is kept counts against the budget
+    tight = KeptSequence(open_sequence(path), derived_bytes=150_000)  # room for two keypoint sets only
+    assert np.array_equal(run_method("bgrestore", tight, masks="oracle").trajectory.poses,
+                          run_method("bgrestore", open_sequence(path), masks="oracle").trajectory.poses)
+    assert 0 < sum(len(f.derived) for f in tight._kept.values()) < len(tight) and tight.derived_left[0] >= 0
+    assert replace(frame, rgb=frame.rgb[::-1].copy()).derived is None
+    assert open_sequence(path)[3].derived is None  # nothing kept outside KeptSequence
+    # what is kept of a pair is kept per pair: the same current frame against another reference
+    from dynslam_lite.depthcluster import DepthClusterConfig, DepthClusterMethod
+    from dynslam_lite.timing import StageTimer
+
+    for ref in (1, 2, 0):
+        pre = [DepthClusterMethod(seq.camera, DepthClusterConfig()).track(seq[ref], seq[5], np.eye(4), StageTimer())
+               .labels.masks["preremoval"] for seq in (kept, open_sequence(path))]
+        assert np.array_equal(*pre), ref

@@ -24,12 +24,12 @@ a person the epipolar vote kept, paints errors forward from keyframe to keyframe
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import astuple, dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
 
-from ..features import Features, FrontendConfig, extract
+from ..features import Features, FrontendConfig, frame_keypoints
 from ..features.method import FrontendMethod
 from ..geometry import invert
 from ..imageops import dilate, union
@@ -127,7 +127,7 @@ class BgRestoreMethod(FrontendMethod):
         super().__init__(camera, config.frontend, masks)
         self.config = config
         self.camera = camera
-        self.past_feats: deque = deque(maxlen=max(config.removal.frame_gap, 1))
+        self.past_feats: deque = deque(maxlen=max(config.removal.frame_gap, 1))  # (index, keypoints)
         self.kf_images: dict[int, KeyframeImage] = {}  # by keyframe id, posed when used
         self.area = np.zeros(3)  # removed, restored, grown pixels over the run
 
@@ -141,10 +141,13 @@ class BgRestoreMethod(FrontendMethod):
         restored frame without keypoints where nothing could be restored."""
         cfg = self.config
         with timer.stage("removal"):
-            feats = extract(frame.gray, frame.depth, cfg.frontend.orb)
-            prev = self.past_feats[0] if self.past_feats else None  # frame_gap frames back
-            removal = decide_removal(instances, prev, feats, frame.depth.shape, cfg.removal)
-            self.past_feats.append(feats)
+            feats = frame_keypoints(frame, cfg.frontend.orb, timer, "removal")
+            prev_index, prev = self.past_feats[0] if self.past_feats else (None, None)  # frame_gap frames back
+            # a function of the two frames, their masks and the settings: kept with the frame
+            key = ("removal", self.masks.name, astuple(cfg.removal), astuple(cfg.frontend.orb), prev_index)
+            removal, ms = frame.derive(key, lambda: decide_removal(instances, prev, feats, frame.depth.shape, cfg.removal))
+            timer.add("removal", ms)
+            self.past_feats.append((frame.index, feats))
         hole = removal.mask
         moved = points_mask(removal.unsegmented, hole.shape, cfg.removal.point_px)
         restored = np.zeros_like(hole)

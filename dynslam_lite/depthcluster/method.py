@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import dataclasses
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field
 
 import cv2
 import numpy as np
@@ -262,6 +262,7 @@ def estimate_pair(
     camera: PinholeCamera, T_init: np.ndarray | None = None, config: DepthClusterConfig | None = None,
     clusters_ref: DepthClusters | None = None, filled_cur: np.ndarray | None = None,
     prior: np.ndarray | None = None, record: bool = False, timer=None, shared: dict | None = None,
+    preremoval: PreRemoval | None = None,
 ) -> PairResult:
     """Run the four steps of paper A on frames A (reference) and B (current).
 
@@ -279,6 +280,8 @@ def estimate_pair(
     timer : optional :class:`dynslam_lite.pipeline.StageTimer`
     shared : the alignments' dict of this pair (:func:`dynslam_lite.odometry.dense.align`), when
         the caller wants its pyramids or brings the reference frame's
+    preremoval : step 2's result for this pair with ``config.preremoval``, made earlier (the
+        runner keeps it with the frame, :meth:`~dynslam_lite.io.Frame.derive`)
     """
     image01("gray_ref", gray_ref)
     image01("gray_cur", gray_cur, gray_ref.shape)
@@ -302,7 +305,7 @@ def estimate_pair(
     removed = np.zeros(depth_ref.shape, bool)
     if cfg.use_preremoval:
         with stage("preremove"):
-            pre = pre_remove(clusters_ref, filled_cur, cfg.preremoval)
+            pre = pre_remove(clusters_ref, filled_cur, cfg.preremoval) if preremoval is None else preremoval
             removed = pre.mask.copy()
     base = removed.copy()
     if prior is not None:
@@ -454,18 +457,31 @@ class DepthClusterMethod(Method):
         self.replaced = 0  # pairs whose reported pose is not the last estimate (select_margin)
         self.area = np.zeros(3)  # sums over pairs of the removed fraction: pre-removal, final, pose
 
-    def _prepare(self, frame) -> tuple[np.ndarray, DepthClusters]:
+    def _prepare(self, frame, timer) -> tuple[np.ndarray, DepthClusters]:
         """The frame's intensity in [0, 1] and its depth layers, computed once per frame (the
-        current frame of one pair is the reference of the next)."""
+        current frame of one pair is the reference of the next; the layers are kept with the
+        frame where it keeps them, :meth:`~dynslam_lite.io.Frame.derive`)."""
         if self._cache is not None and self._cache[0] == frame.timestamp:
             return self._cache[1:]
-        self._cache = (frame.timestamp, frame.gray.astype(np.float32) / 255.0, _layers(frame.depth, self.config))
+        layers, ms = frame.derive(self._layers_key(), lambda: _layers(frame.depth, self.config))
+        timer.add("cluster", ms)
+        self._cache = (frame.timestamp, frame.gray.astype(np.float32) / 255.0, layers)
         return self._cache[1:]
+
+    def _layers_key(self) -> tuple:
+        cfg = self.config
+        return ("depth_layers", cfg.n_clusters, cfg.max_clusters, cfg.max_edge_run)
 
     def track(self, ref, cur, T_init, timer) -> Tracked:
         with timer.stage("cluster"):
-            gray_ref, c_ref = self._prepare(ref)
-            gray_cur, c_cur = self._prepare(cur)
+            gray_ref, c_ref = self._prepare(ref, timer)
+            gray_cur, c_cur = self._prepare(cur, timer)
+        pre = None
+        if self.config.use_preremoval:  # a function of the pair's layers: kept with the current frame
+            with timer.stage("preremove"):
+                key = ("preremoval", astuple(self.config.preremoval), self._layers_key(), ref.index)
+                pre, ms = cur.derive(key, lambda: pre_remove(c_ref, c_cur.filled, self.config.preremoval))
+                timer.add("preremove", ms)
         prior = None
         if self._prior is not None and self._prior[0] == ref.timestamp:
             prior = self._prior[1]
@@ -473,7 +489,8 @@ class DepthClusterMethod(Method):
         if self._pyramids is not None and self._pyramids[0] == ref.timestamp:
             shared["ref_pyramids"] = self._pyramids[1]
         res = estimate_pair(gray_ref, ref.depth, gray_cur, cur.depth, self.camera, T_init,
-                            self.config, c_ref, c_cur.filled, prior, timer=timer, shared=shared)
+                            self.config, c_ref, c_cur.filled, prior, timer=timer, shared=shared,
+                            preremoval=pre)
         if "pyramids" in shared:
             self._pyramids = (cur.timestamp, shared["pyramids"][2:])
         if self.config.propagate and res.ok:

@@ -42,7 +42,7 @@ from ..io import Frame
 from .freespace import free_space_test, median_over_references, nearest_depth
 from .matching import match_descriptors, search_by_projection
 from .optimize import Observations, PoseResult, local_bundle_adjustment, optimize_pose, residuals
-from .orb import Features, ORBConfig, extract
+from .orb import Features, ORBConfig, frame_keypoints
 
 
 @dataclass
@@ -245,7 +245,7 @@ class FeatureTracker:
         stage = timer.stage if timer else (lambda name: nullcontext())
         with stage("orb"):
             if keypoints is None:
-                keypoints = extract(frame.gray, frame.depth, self.config.orb)
+                keypoints = frame_keypoints(frame, self.config.orb, timer)
             feats = keypoints.outside(exclude)
         if not self.keyframes:
             self._add_keyframe(frame, np.eye(4), feats, np.zeros(0, int), np.zeros(0, int),

@@ -36,8 +36,9 @@ class FrontendMethod(Method):
         """Track one frame (all frames, in order); ``timer`` collects ms per stage.
         ``T_cur_ref`` of the result is left to :meth:`track`."""
         timer = timer or StageTimer()
-        with timer.stage("masks"):
-            instances = self.masks(frame)
+        with timer.stage("masks"):  # the source's masks of a frame are kept with it (Frame.derive)
+            instances, ms = frame.derive(("masks", self.masks.name), lambda: tuple(self.masks(frame)))
+            timer.add("masks", ms)
         seen, exclude, T_trial, record = self.prepare(frame, instances, timer)
         tf = self.tracker.process(seen, exclude, timer, T_init=T_trial, refined=T_trial is not None,
                                   unmapped=self.unmapped(record), keypoints=self.keypoints(record))

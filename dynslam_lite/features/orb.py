@@ -6,7 +6,7 @@ References: Mur-Artal & Tardos, ORB-SLAM2 (2017), sec. III-A (stereo/RGB-D keypo
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 import cv2
 import numpy as np
@@ -119,3 +119,15 @@ def extract(gray: np.ndarray, depth: np.ndarray, config: ORBConfig | None = None
     z = sample_nearest(depth, uv).astype(float)
     z[(z < cfg.min_depth_m) | (z > cfg.max_depth_m)] = 0.0
     return Features(uv, octave, desc, z, response).outside(exclude)
+
+
+def frame_keypoints(frame, config: ORBConfig | None = None, timer=None, stage: str = "orb") -> Features:
+    """:func:`extract` of a :class:`~dynslam_lite.io.Frame` without a mask, made once per frame
+    where the frame keeps it (:meth:`~dynslam_lite.io.Frame.derive`: the batch's runs of a
+    sequence share it); ``timer`` (a :class:`~dynslam_lite.timing.StageTimer`) is charged the
+    extraction's time under ``stage`` when it was kept. The arrays are read-only."""
+    cfg = config or ORBConfig()
+    feats, ms = frame.derive(("orb", astuple(cfg)), lambda: extract(frame.gray, frame.depth, cfg))
+    if ms and timer is not None:
+        timer.add(stage, ms)
+    return feats

@@ -151,13 +151,13 @@ def render(
         if idx is None:
             t = _slab(box, origin, dirs)
             closer = t < t_best
-            t_best[closer] = t[closer]
+            np.copyto(t_best, t, where=closer)
             prim[closer] = k
         elif idx.size:
-            t = _slab(box, origin, dirs[:, idx] if sub is None else sub)
-            closer = t < t_best[idx]
-            sel = idx[closer]
-            t_best[sel] = t[closer]
+            t = _slab(box, origin, np.take(dirs, idx, axis=1) if sub is None else sub)
+            closer = t < np.take(t_best, idx)
+            sel = np.compress(closer, idx)
+            t_best[sel] = np.compress(closer, t)
             prim[sel] = k
 
     for box in boxes:
@@ -168,10 +168,10 @@ def render(
         if _contains(group.bound, origin):  # a body closer than its bound: no ray enters it
             idx = rect
         else:
-            tb = _slab(group.bound, origin, dirs[:, rect])
-            idx = rect[tb < t_best[rect]]
+            tb = _slab(group.bound, origin, np.take(dirs, rect, axis=1))
+            idx = np.compress(tb < np.take(t_best, rect), rect)
         if idx.size:
-            sub = dirs[:, idx]  # gathered once; each part tests the rays inside its own rectangle
+            sub = np.take(dirs, idx, axis=1)  # gathered once; each part tests the rays inside its own rectangle
             row, col = np.divmod(idx, W)
             for part in group.parts:
                 b = _screen_bounds(camera, T_c_w, part)
@@ -179,7 +179,7 @@ def render(
                     consider(part, idx, sub)
                     continue
                 inside = (col >= b[0]) & (col <= b[1]) & (row >= b[2]) & (row <= b[3])
-                consider(part, idx[inside], sub[:, inside])
+                consider(part, np.compress(inside, idx), np.compress(inside, sub, axis=1))
 
     rgb = np.zeros((n, 3), np.float32)
     dynamic = np.zeros(n, bool)
@@ -193,16 +193,16 @@ def render(
             continue
         R = box.T_w_b[:3, :3].astype(np.float32)
         o = R.T @ (origin - box.T_w_b[:3, 3]).astype(np.float32)
-        d = (dirs[:, sel].T @ R).astype(np.float32)
-        p = o + t_best[sel, None] * d  # hit points in the box frame
+        d = (np.take(dirs, sel, axis=1).T @ R).astype(np.float32)
+        p = o + np.take(t_best, sel)[:, None] * d  # hit points in the box frame
         half = box.half.astype(np.float32)
         ax = np.argmax(np.abs(p) / half, axis=1)  # the face hit is the one the point lies on
         # face coordinates: the two axes other than the face normal, from the face corner
         a1 = np.where(ax == 0, 1, 0)
         a2 = np.where(ax == 2, 1, 2)
         rows = np.arange(sel.size)
-        fu = p[rows, a1] + half[a1] + 1.7 * ax
-        fv = p[rows, a2] + half[a2] + 0.9 * ax
+        fu = np.take_along_axis(p, a1[:, None], 1)[:, 0] + np.take(half, a1) + 1.7 * ax
+        fv = np.take_along_axis(p, a2[:, None], 1)[:, 0] + np.take(half, a2) + 0.9 * ax
         tex = textures[box.texture]
         S = tex.shape[0]
         colour = interpolate(tex, fu * 256.0 % S, fv * 256.0 % S, wrap=True)
