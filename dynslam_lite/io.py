@@ -329,21 +329,25 @@ class Frame:
         """(H, W) uint8 intensity."""
         return cv2.cvtColor(self.rgb, cv2.COLOR_RGB2GRAY)
 
-    def derive(self, key: tuple, make: Callable[[], Any]) -> tuple[Any, float]:
+    def derive(self, key: tuple, make: Callable[[], Any], timer=None, stage: str = "") -> Any:
         """``make()``, made once per frame where the frame keeps what is derived from it
         (``derived``: :class:`KeptSequence`, whose frames the batch's runs of a sequence share,
         while its budget lasts) and each time otherwise. ``make`` must be a function of the
         sequence's frames and of what ``key`` names (settings, mask source, the other frame),
-        never of a run's state. Returns the value and, when it was made by an earlier call, the
-        milliseconds that took (else 0.0): the caller adds them to its stage, so a run's ms/frame
-        is what the method costs on its own. The value is shared: its arrays are made read-only."""
+        never of a run's state. A value made by an earlier call charges ``timer`` (a
+        :class:`~dynslam_lite.timing.StageTimer`) the milliseconds its making took under
+        ``stage``, so a run's ms/frame is what the method costs on its own. The value is shared:
+        its arrays are made read-only."""
         if self.derived is not None and key in self.derived:
-            return self.derived[key]
+            value, ms = self.derived[key]
+            if timer is not None:
+                timer.add(stage, ms)
+            return value
         t = time.perf_counter()
         value = _read_only(make())
         if self.derived is not None:
             self.derived.keep(key, value, (time.perf_counter() - t) * 1000.0)
-        return value, 0.0
+        return value
 
 
 class Derived(dict):

@@ -145,8 +145,8 @@ class BgRestoreMethod(FrontendMethod):
             prev_index, prev = self.past_feats[0] if self.past_feats else (None, None)  # frame_gap frames back
             # a function of the two frames, their masks and the settings: kept with the frame
             key = ("removal", self.masks.name, astuple(cfg.removal), astuple(cfg.frontend.orb), prev_index)
-            removal, ms = frame.derive(key, lambda: decide_removal(instances, prev, feats, frame.depth.shape, cfg.removal))
-            timer.add("removal", ms)
+            removal = frame.derive(key, lambda: decide_removal(instances, prev, feats, frame.depth.shape, cfg.removal),
+                                   timer, "removal")
             self.past_feats.append((frame.index, feats))
         hole = removal.mask
         moved = points_mask(removal.unsegmented, hole.shape, cfg.removal.point_px)

@@ -463,8 +463,7 @@ class DepthClusterMethod(Method):
         frame where it keeps them, :meth:`~dynslam_lite.io.Frame.derive`)."""
         if self._cache is not None and self._cache[0] == frame.timestamp:
             return self._cache[1:]
-        layers, ms = frame.derive(self._layers_key(), lambda: _layers(frame.depth, self.config))
-        timer.add("cluster", ms)
+        layers = frame.derive(self._layers_key(), lambda: _layers(frame.depth, self.config), timer, "cluster")
         self._cache = (frame.timestamp, frame.gray.astype(np.float32) / 255.0, layers)
         return self._cache[1:]
 
@@ -480,8 +479,7 @@ class DepthClusterMethod(Method):
         if self.config.use_preremoval:  # a function of the pair's layers: kept with the current frame
             with timer.stage("preremove"):
                 key = ("preremoval", astuple(self.config.preremoval), self._layers_key(), ref.index)
-                pre, ms = cur.derive(key, lambda: pre_remove(c_ref, c_cur.filled, self.config.preremoval))
-                timer.add("preremove", ms)
+                pre = cur.derive(key, lambda: pre_remove(c_ref, c_cur.filled, self.config.preremoval), timer, "preremove")
         prior = None
         if self._prior is not None and self._prior[0] == ref.timestamp:
             prior = self._prior[1]

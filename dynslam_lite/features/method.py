@@ -37,8 +37,7 @@ class FrontendMethod(Method):
         ``T_cur_ref`` of the result is left to :meth:`track`."""
         timer = timer or StageTimer()
         with timer.stage("masks"):  # the source's masks of a frame are kept with it (Frame.derive)
-            instances, ms = frame.derive(("masks", self.masks.name), lambda: tuple(self.masks(frame)))
-            timer.add("masks", ms)
+            instances = frame.derive(("masks", self.masks.name), lambda: tuple(self.masks(frame)), timer, "masks")
         seen, exclude, T_trial, record = self.prepare(frame, instances, timer)
         tf = self.tracker.process(seen, exclude, timer, T_init=T_trial, refined=T_trial is not None,
                                   unmapped=self.unmapped(record), keypoints=self.keypoints(record))

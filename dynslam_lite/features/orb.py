@@ -127,7 +127,4 @@ def frame_keypoints(frame, config: ORBConfig | None = None, timer=None, stage: s
     sequence share it); ``timer`` (a :class:`~dynslam_lite.timing.StageTimer`) is charged the
     extraction's time under ``stage`` when it was kept. The arrays are read-only."""
     cfg = config or ORBConfig()
-    feats, ms = frame.derive(("orb", astuple(cfg)), lambda: extract(frame.gray, frame.depth, cfg))
-    if ms and timer is not None:
-        timer.add(stage, ms)
-    return feats
+    return frame.derive(("orb", astuple(cfg)), lambda: extract(frame.gray, frame.depth, cfg), timer, stage)
