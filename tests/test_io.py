@@ -191,3 +191,33 @@ def test_kept_frames_share_what_runs_derive_and_runs_on_them_equal_fresh_ones(sc
         pre = [DepthClusterMethod(seq.camera, DepthClusterConfig()).track(seq[ref], seq[5], np.eye(4), StageTimer())
                .labels.masks["preremoval"] for seq in (kept, open_sequence(path))]
         assert np.array_equal(*pre), ref
+
+
+def test_a_reused_derived_value_charges_its_making_time_to_the_run_that_reuses_it(scene):
+    """Frame.derive: the first run makes the value (its own stage times it), a later run on the
+    kept frame gets the same object and is charged the milliseconds the making took, so ms/frame
+    stays what a method costs alone; a frame that keeps nothing makes the value each time."""
+    import time
+
+    from dynslam_lite.io import KeptSequence
+    from dynslam_lite.timing import StageTimer
+
+    calls = []
+
+    def make():
+        calls.append(1)
+        time.sleep(0.03)
+        return np.arange(4.0)
+
+    frame = KeptSequence(open_sequence(scene("static_xyz", 4)))[1]
+    first, again = StageTimer(), StageTimer()
+    value = frame.derive(("test",), make, first, "stage")
+    assert first.frame.get("stage", 0.0) == 0.0 and len(calls) == 1
+    assert frame.derive(("test",), make, again, "stage") is value and len(calls) == 1
+    assert 30.0 <= again.frame["stage"] < 1000.0  # the making's time, not the lookup's
+    assert not value.flags.writeable  # shared between runs: read-only
+    plain = open_sequence(scene("static_xyz", 4))[1]
+    other = StageTimer()
+    plain.derive(("test",), make, other, "stage")
+    plain.derive(("test",), make, other, "stage")
+    assert len(calls) == 3 and other.frame.get("stage", 0.0) == 0.0
