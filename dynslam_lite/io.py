@@ -555,11 +555,10 @@ class KeptSequence(RGBDSequence):
         if -len(self) <= i < len(self) and i % len(self) in self._kept:
             return self._kept[i % len(self)]
         frame = super().__getitem__(i)
-        arrays = [a for a in (frame.rgb, frame.depth, frame.mask, frame.instances) if a is not None]
-        size = sum(a.nbytes for a in arrays)
+        pixels = (frame.rgb, frame.depth, frame.mask, frame.instances)
+        size = _nbytes(pixels)
         if self._bytes + size <= self.budget_bytes:
-            for a in arrays:
-                a.setflags(write=False)  # shared by every run: a method must not write into it
+            _read_only(pixels)  # shared by every run: a method must not write into it
             frame.derived = Derived(self.derived_left)  # and what the runs derive from it
             self._kept[i % len(self)] = frame
             self._bytes += size

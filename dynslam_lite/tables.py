@@ -689,9 +689,10 @@ def timing(results: list[RunRecord]) -> Table:
     rows = [[r.name, r.label, f"{r.ms_per_frame:.1f}"] for r in results]
     notes = ("Wall-clock milliseconds per frame, whole pipeline, measured during the run on this "
              "machine with other jobs in parallel: varies between runs, unlike the error tables. "
-             "The runs of a sequence in one worker share what they derive from a frame's pixels "
-             "alone (ORB keypoints, masks, depth layers); each run is charged the time their "
-             "making took, so a row is what the method costs on its own. "
+             "The runs of a sequence in one worker share what they derive from its frames alone "
+             "(ORB keypoints, masks, depth layers, paper A's pre-removal and paper C's removal of "
+             "each frame); each run is charged the time their making took, so a row is what the "
+             "method costs on its own. "
              "`python -m dynslam_lite bench` measures per stage.")
     return ["sequence", "method", "ms/frame"], rows, notes
 
