@@ -216,6 +216,16 @@ OBJECT_ROWS = (STATIC_ORB, STATIC_ORB_ORACLE, STATIC_ORB_CONSISTENT, WS_PAPER_FI
 # the same where the mask source misses the near people for a while (the crowd)
 MISSED_ROWS = (STATIC_ORB_MISSED, STATIC_ORB_MISSED_SCREEN, WS_MISSED_NO_SCREEN, WS_MISSED, BG_MISSED_NO_SCREEN,
                BG_MISSED)
+# ... and on the real clips: the person model losing the near people in the same frames (static-orb[person:missed],
+# static-orb[person:missed,screening], weightedstatic[person:missed,no-screening], weightedstatic[person:missed],
+# bgrestore[person:missed,no-screening], bgrestore[person:missed])
+MISSED_REAL_ROWS = tuple(Run(r.label.replace(_MISSED, "person:missed"), r.method, "person:missed", r.params,
+                             r.description.replace("near people missed", "person model, near people missed"))
+                         for r in MISSED_ROWS)
+# papers B and C on the real clips: masks alone, each paper's steps switched off one at a time
+REAL_BC_ROWS = (STATIC_ORB, STATIC_ORB_PERSON, WS_NONE, WS_EQ4, WS_NO_DILATE, WS_NO_SCREEN, WEIGHTEDSTATIC, BG_NONE,
+                BG_INSTANCES, BG_NO_SCREEN, BGRESTORE, BG_NO_RESTORE, BG_MAP_RESTORED, BG_CONSISTENT, BG_WIDE,
+                BG_WIDE_NO_CHECK, *MISSED_REAL_ROWS)
 # the methods on walking_exposure (the same runs exist on walking_xyz, the same frames at one exposure)
 EXPOSURE_ROWS = (STATIC_DENSE, OPENCV_ODOMETRY, DC_NO_BRIGHTNESS, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE)
 # paper A's ablation runs (the default is run anyway)
@@ -252,6 +262,8 @@ RUN_SETS = (
                          STATIC_ORB_PERSON, WS_NONE, BG_NONE, BG_CONSISTENT, WS_EQ4, BG_INSTANCES, WS_NO_DILATE,
                          WS_NO_SCREEN, BG_NO_SCREEN, BG_NO_RESTORE, BG_MAP_RESTORED, BG_WIDE, BG_WIDE_NO_CHECK),
            real=True),
+    # a detector that misses the near people for a while, on real people with true poses
+    RunSet("missed detections on real data", MISSED_REAL_ROWS, real=True),
     RunSet("paper A ablation on real data", DC_ABLATION, real=True),
     RunSet("sensitivity on real data", SENSITIVITY, real=True),
     # the real clips at a lower frame rate: larger motion between frames, the hard moments of

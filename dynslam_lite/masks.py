@@ -22,7 +22,9 @@ a source is chosen by a spec string (``--masks`` on the command line, ``masks`` 
   components. A frame without a file has no masks;
 * ``person`` — the bundled MediaPipe Selfie Segmentation model run with OpenCV
   (:mod:`dynslam_lite.segmentation`), a stand-in for the papers' networks; ``person:landscape``
-  uses its 256x144 variant;
+  uses its 256x144 variant; ``person:missed`` (``person:landscape:missed``) the model's masks with
+  the near people missed as ``oracle:missed`` misses them (real data: the detector's failure
+  where people crowd, on a clip with true poses);
 * ``onnx:PATH`` — a YOLOv5-seg / YOLOv8-seg ONNX export of your own, person class only.
 """
 from __future__ import annotations
@@ -47,7 +49,8 @@ class NoMasks:
 
 @dataclass
 class Degradation:
-    """How ``oracle:degraded`` (and ``oracle:missed``) spoil the ground truth, per instance and frame.
+    """How ``oracle:degraded`` spoils the ground truth, per instance and frame (and which frames
+    ``oracle:missed`` and ``person:missed`` miss the near people in, :class:`NearMissed`).
 
     Attributes
     ----------
@@ -55,9 +58,9 @@ class Degradation:
     drop_rate : probability that an instance is missed in a frame
     false_blob_rate : probability of a false elliptic blob in a frame
     seed : of the random draws (with the frame index)
-    near_fraction, near_miss_frames, near_miss_period : instances covering more than
-        ``near_fraction`` of the image are missed in the last ``near_miss_frames`` frames of every
-        ``near_miss_period`` (0 frames: never)
+    near_fraction, near_miss_frames, near_miss_period (:class:`NearMissed`) : instances covering
+        more than ``near_fraction`` of the image are missed in the last ``near_miss_frames`` frames
+        of every ``near_miss_period`` (0 frames: never)
     """
 
     max_dilate_px: int = 6
@@ -108,8 +111,6 @@ class OracleMasks:
         if d is None:
             return inst
         rng = np.random.default_rng([d.seed, frame.index])
-        if d.misses_near(frame.index):
-            inst = [m for m in inst if m.mean() <= d.near_fraction]
         out = []
         for m in inst:
             if rng.random() < d.drop_rate:
@@ -126,6 +127,21 @@ class OracleMasks:
             cv2.ellipse(blob, c, (int(rng.integers(15, 60)), int(rng.integers(15, 60))), 0, 0, 360, 1, -1)
             out.append(blob.astype(bool))
         return out
+
+
+class NearMissed:
+    """Another source's masks, with every instance covering more than ``near_fraction`` of the
+    image dropped in the frames ``degradation.misses_near`` names (``oracle:missed``,
+    ``person:missed``): a detector losing the people close to the camera for a while."""
+
+    def __init__(self, inner, degradation: Degradation, name: str):
+        self.inner, self.degradation, self.name = inner, degradation, name
+
+    def __call__(self, frame: Frame) -> list[np.ndarray]:
+        inst = self.inner(frame)
+        if self.degradation.misses_near(frame.index):
+            inst = [m for m in inst if m.mean() <= self.degradation.near_fraction]
+        return inst
 
 
 class AllObjectMasks:
@@ -205,7 +221,7 @@ class FileMasks:
 
 
 SOURCES = ("none, oracle, oracle:degraded, oracle:missed, oracle:all, oracle:moving, files:DIR, person, "
-           "person:landscape or onnx:PATH")
+           "person:landscape, person:missed, person:landscape:missed or onnx:PATH")
 
 
 def make_mask_source(spec: str):
@@ -215,8 +231,8 @@ def make_mask_source(spec: str):
         return NoMasks()
     if kind == "oracle" and arg in ("", "degraded"):
         return OracleMasks(Degradation() if arg else None)
-    if kind == "oracle" and arg == "missed":
-        return OracleMasks(MISSED, "oracle:missed")
+    if spec.endswith(":missed") and spec[: -len(":missed")] in ("oracle", "person", "person:landscape"):
+        return NearMissed(make_mask_source(spec[: -len(":missed")]), MISSED, spec)
     if kind == "oracle" and arg == "all":
         return AllObjectMasks()
     if kind == "oracle" and arg == "moving":

@@ -191,6 +191,28 @@ def test_object_scenes_are_labelled_rows_of_papers_b_and_c_and_fill_their_own_ta
     assert rows[E.OBJECT_ROWS.index(E.WS_NO_SCREEN)][5:8] == ["0.80 / 0.80", "-", "-"]
 
 
+def test_real_clips_run_the_missed_detector_rows_and_fill_their_own_table():
+    """The missed-detection rows of synthetic crowd run on the real clips with the person model
+    missing the near people (``person:missed``); the real table lists papers B and C's rows per
+    real clip in registry order, with the frames they miss."""
+    import dataclasses
+
+    from dynslam_lite import tables
+
+    real = E.runs_for("real")
+    assert len(E.MISSED_REAL_ROWS) == len(E.MISSED_ROWS) and all(r in real for r in E.MISSED_REAL_ROWS)
+    for r, s in zip(E.MISSED_REAL_ROWS, E.MISSED_ROWS):
+        assert (r.method, r.params) == (s.method, s.params) and r.mask_source("real") == "person:missed"
+        assert r.label == s.label.replace(s.masks, "person:missed") and "person model" in r.description
+    assert not set(E.MISSED_REAL_ROWS) & set(E.runs_for("synthetic", "crowd"))
+    recs = [dataclasses.replace(_record("real/bonn", run, 0.01 * (k + 1)), frames=120)
+            for k, run in enumerate(E.REAL_BC_ROWS)]
+    recs.append(_record("synthetic/crowd", E.WEIGHTEDSTATIC, 0.5))
+    header, rows, notes = tables.paper_bc_real(recs[::-1])
+    assert [r[2] for r in rows] == [run.label for run in E.REAL_BC_ROWS] and {r[0] for r in rows} == {"real/bonn"}
+    assert rows[0][3] == 0.01 and "frames 24-35, 60-71 and 96-107" in notes
+
+
 def test_paper_a_ablation_has_the_paper_alone_each_addition_and_the_default_per_sequence():
     from dynslam_lite import tables
 

@@ -6,7 +6,8 @@ import pytest
 from dynslam_lite.evaluation import MaskScores
 from dynslam_lite.io import Frame, SequenceError, open_sequence
 from dynslam_lite.imageops import split_instances
-from dynslam_lite.masks import MISSED, FileMasks, make_mask_source
+from dynslam_lite.errors import ConfigError
+from dynslam_lite.masks import MISSED, FileMasks, NearMissed, make_mask_source
 
 
 def _frame(mask, index=0, t=100.0):
@@ -82,3 +83,25 @@ def test_missed_oracle_loses_the_near_people_in_12_of_every_36_frames():
     # the ranges the objects table prints
     assert MISSED.near_miss_ranges(150) == [(24, 35), (60, 71), (96, 107), (132, 143)]
     assert MISSED.near_miss_ranges(30) == [(24, 29)] and MISSED.near_miss_ranges(24) == []
+
+
+def test_missed_person_model_drops_the_near_instances_in_the_frames_the_missed_oracle_does():
+    """``person:missed`` is the person model's masks with the rule of ``oracle:missed``: any
+    source's instances over 5 % of the image are dropped in frames 24-35 of every 36, the rest
+    pass unchanged."""
+    near = np.zeros((120, 160), bool)
+    near[:, :40] = True
+    far = np.zeros((120, 160), bool)
+    far[10:20, 100:110] = True
+    wrapped = NearMissed(lambda frame: [near, far], MISSED, "test:missed")
+    oracle = make_mask_source("oracle:missed")
+    for index in range(0, 80):
+        inst = wrapped(_frame(near | far, index))
+        assert [m.sum() for m in inst] == [m.sum() for m in oracle(_frame(near | far, index))], index
+        assert (len(inst) == 1) == (index % 36 >= 24) and inst[-1] is far
+    for spec, inner in (("person:missed", "person"), ("person:landscape:missed", "person:landscape")):
+        src = make_mask_source(spec)
+        assert isinstance(src, NearMissed) and src.name == spec and src.inner.name == inner
+    for spec in ("person:square:missed", "none:missed", "oracle:all:missed"):
+        with pytest.raises(ConfigError, match="unknown mask source"):
+            make_mask_source(spec)
