@@ -232,7 +232,7 @@ def _coerce(key: str, value: Any, hint, default: Any) -> Any:
             raise bad(f"a finite non-negative {kind}")
         if name in _AT_LEAST_ONE and value < 1:
             raise bad(f"a {kind} of at least 1")
-        if ("fraction" in name or "ratio" in name) and value > 1:
+        if {"fraction", "ratio"} & set(name.split("_")) and value > 1:  # words: not "iterations"
             raise bad(f"a {kind} between 0 and 1")
         return value
     if typing.get_origin(hint) is tuple:
