@@ -526,10 +526,18 @@ def paper_c_restoration(results: list[RunRecord]) -> Table:
     return header, rows, notes
 
 
+def _measured(results: list[RunRecord], sequences: list[str], runs: list, missed: list) -> tuple[list, int]:
+    """The (sequence, run, record) of every run of ``runs`` measured on each of ``sequences``, in
+    that order, and the most frames of a run of ``missed`` (the frames its missed-detection rule
+    spans; 0 when none ran)."""
+    idx = _index(results)
+    found = [(seq, run, idx[seq, run.label]) for seq in sequences for run in runs if (seq, run.label) in idx]
+    return found, max((r.frames for _, run, r in found if run in missed), default=0)
+
+
 def paper_bc_objects(results: list[RunRecord]) -> Table:
     """Papers B and C on our object scenes: every configuration's ATE, and what its dynamic
     points / removed pixels were against the ground truth of every moving object."""
-    idx = _index(results)
     header = ["sequence", "configuration", "run label", "ATE RMSE (m)", "failed frames",
               "dynamic points P / R (geometric / epipolar test)", "new keypoints kept out of the map P / R",
               "every verdict (dynamic points and new keypoints) P / R", "removed pixels P / R"]
@@ -546,18 +554,14 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
         p = _defined_pr(c)
         return f"{fmt(p[0], 2)} / {fmt(p[1], 2)}" if p else f"- (no moving match; {c.fp} false alarms)"
 
-    rows, missed_frames = [], 0
-    for seq in _ours(results):
-        for run in E.OBJECT_ROWS + E.MISSED_ROWS:
-            r = idx.get((seq, run.label))
-            if r:
-                if run in E.MISSED_ROWS:
-                    missed_frames = max(missed_frames, r.frames)
-                points = r.score("points/moved" if run.method == "bgrestore" else "points/geometric")
-                new = r.score("points/new")
-                rows.append([seq, run.description, run.label, r.errors.ate.rmse, r.failed_frames,
-                             pr(points), pr(new), pr(joint(points, new)) if points and new else "-",
-                             pr(r.score("pixels/removed"))])
+    rows = []
+    found, missed_frames = _measured(results, _ours(results), E.OBJECT_ROWS + E.MISSED_ROWS, E.MISSED_ROWS)
+    for seq, run, r in found:
+        points = r.score("points/moved" if run.method == "bgrestore" else "points/geometric")
+        new = r.score("points/new")
+        rows.append([seq, run.description, run.label, r.errors.ate.rmse, r.failed_frames,
+                     pr(points), pr(new), pr(joint(points, new)) if points and new else "-",
+                     pr(r.score("pixels/removed"))])
     notes = ("ATE RMSE (m) after SE(3) alignment, on this project's object scenes: walking_carry "
              "(a board and a box carried across the view: moving, not people), walking_push (a "
              "large printed box pushed 1.6 m about 2 m ahead of the moving camera; a person "
@@ -600,17 +604,10 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
 def paper_bc_real(results: list[RunRecord]) -> Table:
     """Papers B and C on the real clips: masks alone, each paper's steps switched off one at a
     time, and a person model that misses the near people for a while."""
-    idx = _index(results)
     header = ["sequence", "configuration", "run label", "ATE RMSE (m)", "RPE trans RMSE (m/s)", "failed frames"]
-    rows, missed_frames = [], 0
-    for seq in _real(results):
-        for run in E.REAL_BC_ROWS:
-            r = idx.get((seq, run.label))
-            if r:
-                if run in E.MISSED_REAL_ROWS:
-                    missed_frames = max(missed_frames, r.frames)
-                rows.append([seq, run.description, run.label, r.errors.ate.rmse, r.errors.rpe_trans.rmse,
-                             r.failed_frames])
+    found, missed_frames = _measured(results, _real(results), E.REAL_BC_ROWS, E.MISSED_REAL_ROWS)
+    rows = [[seq, run.description, run.label, r.errors.ate.rmse, r.errors.rpe_trans.rmse, r.failed_frames]
+            for seq, run, r in found]
     notes = ("ATE RMSE (m) after SE(3) alignment and 1-s RPE on the real clips against their "
              "motion-capture poses, with the bundled person model as the mask source (a stand-in for "
              "the papers' networks). 'person:missed': the model's masks with every instance covering "
