@@ -196,21 +196,29 @@ def paper_a_masks(results: list[RunRecord]) -> Table:
     return header, rows, notes
 
 
+def _measured(results: list[RunRecord], sequences: list[str], runs: list) -> list[tuple]:
+    """The (sequence, run, record) of every run of ``runs`` measured on each of ``sequences``, in
+    that order (a table's rows)."""
+    idx = _index(results)
+    return [(seq, run, idx[seq, run.label]) for seq in sequences for run in runs if (seq, run.label) in idx]
+
+
+def _missed_frames(found: list[tuple], missed: list) -> int:
+    """The most frames of a run of ``missed`` among ``found`` (what its missed-detection rule
+    spans; 0 when none ran)."""
+    return max((r.frames for _, run, r in found if run in missed), default=0)
+
+
 def paper_a_ablation(results: list[RunRecord]) -> Table:
     """What each of our additions to paper A adds: the paper alone, each addition by itself, all."""
-    idx = _index(results)
     header = ["sequence", "configuration", "run label", "ATE RMSE (m)", "RPE RMSE (m/s)", "failed frames",
               "pose area (%)", "pose P", "pose R", "final area (%)", "final P", "final R", "final IoU"]
     seqs = sorted({r.sequence for r in results if r.label == E.DC_PAPER.label},
                   key=lambda s: (s.startswith("real/"), s))
-    rows = []
-    for seq in seqs:
-        for run in E.PAPER_A_ABLATION:
-            r = idx.get((seq, run.label))
-            if r is not None:
-                rows.append([seq, run.description, run.label, r.errors.ate.rmse, r.errors.rpe_trans.rmse,
-                             r.failed_frames, _area(r, "removed_area_pose"), *_moving_pr(r, "pixels/pose")[:2],
-                             _area(r, "removed_area_final"), *_moving_pr(r, "pixels/final")])
+    rows = [[seq, run.description, run.label, r.errors.ate.rmse, r.errors.rpe_trans.rmse, r.failed_frames,
+             _area(r, "removed_area_pose"), *_moving_pr(r, "pixels/pose")[:2], _area(r, "removed_area_final"),
+             *_moving_pr(r, "pixels/final")]
+            for seq, run, r in _measured(results, seqs, E.PAPER_A_ABLATION)]
     notes = ("Measured, depthcluster without semantic masks (paper A uses none). 'paper A only': "
              "pre-removal takes the whole largest region of the moving layer, the background update "
              "takes outlier pixels only, each frame pair starts from no prior, and the mask reported "
@@ -526,15 +534,6 @@ def paper_c_restoration(results: list[RunRecord]) -> Table:
     return header, rows, notes
 
 
-def _measured(results: list[RunRecord], sequences: list[str], runs: list, missed: list) -> tuple[list, int]:
-    """The (sequence, run, record) of every run of ``runs`` measured on each of ``sequences``, in
-    that order, and the most frames of a run of ``missed`` (the frames its missed-detection rule
-    spans; 0 when none ran)."""
-    idx = _index(results)
-    found = [(seq, run, idx[seq, run.label]) for seq in sequences for run in runs if (seq, run.label) in idx]
-    return found, max((r.frames for _, run, r in found if run in missed), default=0)
-
-
 def paper_bc_objects(results: list[RunRecord]) -> Table:
     """Papers B and C on our object scenes: every configuration's ATE, and what its dynamic
     points / removed pixels were against the ground truth of every moving object."""
@@ -555,7 +554,8 @@ def paper_bc_objects(results: list[RunRecord]) -> Table:
         return f"{fmt(p[0], 2)} / {fmt(p[1], 2)}" if p else f"- (no moving match; {c.fp} false alarms)"
 
     rows = []
-    found, missed_frames = _measured(results, _ours(results), E.OBJECT_ROWS + E.MISSED_ROWS, E.MISSED_ROWS)
+    found = _measured(results, _ours(results), E.OBJECT_ROWS + E.MISSED_ROWS)
+    missed_frames = _missed_frames(found, E.MISSED_ROWS)
     for seq, run, r in found:
         points = r.score("points/moved" if run.method == "bgrestore" else "points/geometric")
         new = r.score("points/new")
@@ -605,7 +605,8 @@ def paper_bc_real(results: list[RunRecord]) -> Table:
     """Papers B and C on the real clips: masks alone, each paper's steps switched off one at a
     time, and a person model that misses the near people for a while."""
     header = ["sequence", "configuration", "run label", "ATE RMSE (m)", "RPE trans RMSE (m/s)", "failed frames"]
-    found, missed_frames = _measured(results, _real(results), E.REAL_BC_ROWS, E.MISSED_REAL_ROWS)
+    found = _measured(results, _real(results), E.REAL_BC_ROWS)
+    missed_frames = _missed_frames(found, E.MISSED_REAL_ROWS)
     rows = [[seq, run.description, run.label, r.errors.ate.rmse, r.errors.rpe_trans.rmse, r.failed_frames]
             for seq, run, r in found]
     notes = ("ATE RMSE (m) after SE(3) alignment and 1-s RPE on the real clips against their "

@@ -16,6 +16,7 @@ import psutil
 import pytest
 
 from dynslam_lite.cli import main
+from dynslam_lite.pipeline import METHODS, make_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -62,8 +63,6 @@ def test_set_values_are_checked_against_the_config(clip, tmp_path, capsys):
         assert main(["run", "static-orb", str(clip), "--out", str(tmp_path / "t.txt"), "--set", item]) == 2
         _one_line_error(capsys.readouterr().err, expected)
     # a count whose name holds 'ratio' inside a word ('iterations') is a count, not a fraction
-    from dynslam_lite.pipeline import METHODS, make_config
-
     assert make_config(METHODS["static-orb"].config_type, {"ba_iterations": 3}).ba_iterations == 3
     assert make_config(METHODS["depthcluster"].config_type, {"update_iterations": 3}).update_iterations == 3
     assert make_config(METHODS["weightedstatic"].config_type, {"lm_iterations": 30}).lm_iterations == 30

@@ -58,10 +58,10 @@ updates starting from the fallback (Bonn dev 0.0911 -> 0.0907, synthetic crowd 0
 crowd at 570 frames 0.1358 -> 0.1385 m); and falling back to the prior alone before every pixel,
 with the updates starting from it (0.0865, 0.0724, 0.1548 m). The prior itself is wide: it
 carries the pose's whole removed mask (``excluded``, 40-60 % of the image in the crowd), not the
-moving one; the moving one as the prior does not narrow the removal (pose mask 0.488 -> 0.481 of the Bonn dev
-image: pre-removal takes most of it) and moves ATE within the spread (Bonn dev 0.0911 -> 0.0945,
-crowd 0.0535 -> 0.0588, walking_xyz 0.0198 -> 0.0204, walking_halfsphere 0.0153 -> 0.0149,
-walking_static 0.0123 -> 0.0134, crowd at 570 frames 0.1358 -> 0.1337 m).
+moving one; the moving one as the prior does not narrow the removal (pose mask 0.488 -> 0.481
+of the Bonn dev image: pre-removal takes most of it) and moves ATE within the spread (Bonn dev
+0.0911 -> 0.0945, crowd 0.0535 -> 0.0588, walking_xyz 0.0198 -> 0.0204, walking_halfsphere
+0.0153 -> 0.0149, walking_static 0.0123 -> 0.0134, crowd at 570 frames 0.1358 -> 0.1337 m).
 """
 from __future__ import annotations
 
