@@ -292,6 +292,19 @@ def test_pose_selection_does_not_follow_the_photometric_term_against_the_depth_t
     assert blind.chosen == "prediction"
 
 
+def test_pose_selection_margin_guards_nearby_poses_only():
+    """Within the 25 % margin a candidate 1 cm from the last estimate does not replace it (a
+    noise-level difference), one 3 cm away does (two hypotheses: ``select_far_m``, 2 cm)."""
+    from dynslam_lite.depthcluster.method import clearly_better
+
+    T = se3_exp([0.01, -0.005, 0.01, 0.004, -0.006, 0.002])
+    near, far = (se3_exp([d, 0.0, 0.0, 0.0, 0.0, 0.0]) @ T for d in (0.01, 0.03))
+    cfg = DepthClusterConfig()
+    assert not clearly_better(near, 0.030, T, 0.034, cfg) and clearly_better(near, 0.026, T, 0.034, cfg)
+    assert clearly_better(far, 0.030, T, 0.034, cfg) and not clearly_better(far, 0.035, T, 0.034, cfg)
+    assert not clearly_better(far, 0.030, T, 0.034, DepthClusterConfig(select_far_m=0.0))
+
+
 def test_pose_selection_keeps_a_good_estimate_over_a_poor_prediction():
     T = se3_exp([0.01, -0.005, 0.01, 0.004, -0.006, 0.002])
     cam, g0, d0, g1, d1 = _static_pair(T)
