@@ -11,6 +11,7 @@ import os
 import shutil
 import signal
 import tempfile
+import time
 from pathlib import Path
 from typing import Sequence
 
@@ -55,11 +56,25 @@ def write_table(root: str | Path, rel_stem: str, title: str, header, rows, notes
 FINGERPRINTED = ("dynslam_lite/**/*.py", "notebooks/*.ipynb", "notebooks/reproduce.yaml")
 
 
+def _parse(source: str, attempts: int = 8) -> ast.Module:
+    """``ast.parse``, tried again when CPython 3.11 reports "AST constructor recursion depth
+    mismatch": its AST constructor keeps that depth per interpreter, not per thread, so a parse in
+    another thread of the process (a Dask scheduler's, a library's) can break ours when a garbage
+    collection hands over the GIL midway (python/cpython#106905). Waits 10 ms, then twice as
+    long each time (1.3 s in all)."""
+    for k in range(attempts - 1):
+        try:
+            return ast.parse(source)
+        except SystemError:
+            time.sleep(0.01 * 2**k)
+    return ast.parse(source)
+
+
 def _code_only(source: str) -> str:
     """Python source as its syntax tree without docstrings: comments, docstrings, blank lines
     and line breaks do not change it. Source that does not parse is taken as it is."""
     try:
-        tree = ast.parse(source)
+        tree = _parse(source)
     except SyntaxError:
         return source
     for node in ast.walk(tree):
