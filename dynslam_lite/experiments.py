@@ -74,26 +74,31 @@ BGRESTORE = _run("bgrestore", "bgrestore", SEMANTIC, "paper C with oracle (synth
 # (the release of explained pixels changes the reported mask only: its columns show it, no run needed)
 _NO_PRIOR, _NO_GROW, _NO_CUT = ("propagate", False), ("outlier.grow", False), ("preremoval.max_region_fraction", 1.0)
 _NO_RELEASE, _NO_SELECT = ("release", False), ("select_margin", 0.0)
-_NO_BRIGHTNESS = ("dense.affine_brightness", False)
+_NO_BRIGHTNESS, _NO_GATE = ("dense.affine_brightness", False), ("dense.max_depth_diff_m", 0.0)
 DC_PAPER = Run("depthcluster[paper]", "depthcluster", "none",
-               (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
+               (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS, _NO_GATE),
                "paper A only: every addition of ours off")
 DC_PRIOR = Run("depthcluster[paper+prior]", "depthcluster", "none",
-               (_NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
+               (_NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS, _NO_GATE),
                "+ the previous pair's moving mask as a prior of the first estimate (propagate)")
 DC_GROW = Run("depthcluster[paper+grow]", "depthcluster", "none",
-              (_NO_PRIOR, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
+              (_NO_PRIOR, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS, _NO_GATE),
               "+ whole depth-layer regions taken in the background update (outlier.grow)")
 DC_CUT = Run("depthcluster[paper+cut]", "depthcluster", "none",
-             (_NO_PRIOR, _NO_GROW, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
+             (_NO_PRIOR, _NO_GROW, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS, _NO_GATE),
              "+ pre-removal regions over 25 % of the image cut to the dynamic blocks (max_region_fraction)")
 DC_BRIGHTNESS = Run("depthcluster[paper+brightness]", "depthcluster", "none",
-                    (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE),
+                    (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_GATE),
                     "+ a gain and bias of the image brightness estimated with the pose (dense.affine_brightness)")
+DC_GATE = Run("depthcluster[paper+gate]", "depthcluster", "none",
+              (_NO_PRIOR, _NO_GROW, _NO_CUT, _NO_SELECT, _NO_RELEASE, _NO_BRIGHTNESS),
+              "+ correspondences whose depths differ by over 7 cm left out of the solver (dense.max_depth_diff_m)")
 DC_NO_SELECT = Run("depthcluster[no-select]", "depthcluster", "none", (_NO_SELECT,),
                    "the default without the pose selection: always the last estimate (select_margin = 0)")
 DC_NO_BRIGHTNESS = Run("depthcluster[no-brightness]", "depthcluster", "none", (_NO_BRIGHTNESS,),
                        "the default without the brightness model: eq. 5's photometric term as printed")
+DC_NO_GATE = Run("depthcluster[no-gate]", "depthcluster", "none", (_NO_GATE,),
+                 "the default without the depth gate: every correspondence in the solver, eq. 5 as printed")
 
 # paper B's ablation: masks alone, then the geometric test and the weights on degraded masks
 STATIC_ORB_ORACLE = _run("static-orb[oracle]", "static-orb", "oracle", "masks only, oracle")
@@ -229,12 +234,13 @@ REAL_BC_ROWS = (STATIC_ORB, STATIC_ORB_PERSON, WS_NONE, WS_EQ4, WS_NO_DILATE, WS
 # the methods on walking_exposure (the same runs exist on walking_xyz, the same frames at one exposure)
 EXPOSURE_ROWS = (STATIC_DENSE, OPENCV_ODOMETRY, DC_NO_BRIGHTNESS, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC, BGRESTORE)
 # paper A's ablation runs (the default is run anyway)
-DC_ABLATION = (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_BRIGHTNESS, DC_NO_SELECT, DC_NO_BRIGHTNESS)
-# the methods of the summary figure; at lower frame rates depthcluster without its pose selection
-# and without its brightness model too
+DC_ABLATION = (DC_PAPER, DC_PRIOR, DC_GROW, DC_CUT, DC_BRIGHTNESS, DC_GATE, DC_NO_SELECT, DC_NO_BRIGHTNESS,
+               DC_NO_GATE)
+# the methods of the summary figure; at lower frame rates depthcluster without its pose selection,
+# its brightness model and its depth gate too
 MAIN = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DEPTHCLUSTER, WEIGHTEDSTATIC, BGRESTORE)
-FRAME_RATE_ROWS = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DC_NO_SELECT, DC_NO_BRIGHTNESS, DEPTHCLUSTER,
-                   WEIGHTEDSTATIC, BGRESTORE)
+FRAME_RATE_ROWS = (STATIC_DENSE, OPENCV_ODOMETRY, STATIC_ORB, DC_NO_SELECT, DC_NO_BRIGHTNESS, DC_NO_GATE,
+                   DEPTHCLUSTER, WEIGHTEDSTATIC, BGRESTORE)
 WALKING = ("walking_xyz", "walking_halfsphere", "walking_rpy", "walking_static")
 RUN_SETS = (
     RunSet("baselines and papers A, B", (STATIC_DENSE, OPENCV_ODOMETRY, DEPTHCLUSTER, STATIC_ORB, WEIGHTEDSTATIC),

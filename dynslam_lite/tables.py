@@ -228,9 +228,13 @@ def paper_a_ablation(results: list[RunRecord]) -> Table:
              "larger than 25 % of the image, a floor or wall sharing the person's layer, is cut to "
              "the dynamic blocks and their neighbours), 'brightness' (a gain and bias of the image "
              "brightness estimated with the pose, and the residuals of the update read under them: a "
-             "camera with automatic exposure brightens or darkens the whole image between frames); the "
-             "default has these four, the pose selection and the release. 'no-brightness' is the "
-             "default with eq. 5's photometric term as printed. "
+             "camera with automatic exposure brightens or darkens the whole image between frames), 'gate' "
+             "(a correspondence whose transformed reference depth and current depth differ by more than "
+             "7 cm, OpenCV's RGB-D odometry's maxDepthDiff, is left out of both terms of the solver: two "
+             "surfaces meet there, an occluding or disoccluded one such as a person entering the view); "
+             "the default has these five, the pose selection and the release. 'no-brightness' is the "
+             "default with eq. 5's photometric term as printed, 'no-gate' the default with every "
+             "correspondence in the solver. "
              "'no-select' is the default reporting always the last estimate of a pair; "
              "the default reports the prediction or an earlier estimate instead when its median absolute "
              "photometric residual over the textured reference pixels is more than 25 % lower and its "
@@ -679,7 +683,8 @@ def real_frame_rate(results: list[RunRecord]) -> Table:
              "between two frames. 'frames' and 'failed frames' per column, in the same order. Masks as in "
              "the other real rows (the person model for weightedstatic and bgrestore); "
              f"'{E.DC_NO_SELECT.label}' is depthcluster without its pose selection, "
-             f"'{E.DC_NO_BRIGHTNESS.label}' without its brightness model. One run per cell: "
+             f"'{E.DC_NO_BRIGHTNESS.label}' without its brightness model, '{E.DC_NO_GATE.label}' without "
+             "its depth gate. One run per cell: "
              "the sensitivity table says how far a single run moves. Real clips only with `--data`.")
     return header, rows, notes
 

@@ -35,7 +35,7 @@ def test_runs_per_sequence_follow_the_run_sets():
         "static-dense", "opencv-odometry", "depthcluster", "static-orb", "weightedstatic", E.OPENCV_FAST.label]
     assert E.OPENCV_FAST not in E.runs_for("synthetic", "sitting_xyz")
     xyz = E.runs_for("synthetic", "walking_xyz")
-    assert len(xyz) == 25 and xyz[-1] is E.BG_ALL_VIEWS and E.BGRESTORE in xyz
+    assert len(xyz) == 27 and xyz[-1] is E.BG_ALL_VIEWS and E.BGRESTORE in xyz
     carry = E.runs_for("synthetic", "walking_carry")
     assert carry == [E.STATIC_DENSE, E.OPENCV_ODOMETRY, E.DEPTHCLUSTER, *E.OBJECT_ROWS, *E.SENSITIVITY]
     assert E.DC_PAPER not in carry and E.DC_PAPER in E.runs_for("synthetic", "crowd")
@@ -46,8 +46,8 @@ def test_runs_per_sequence_follow_the_run_sets():
 
 def test_the_real_clips_at_lower_frame_rates_run_the_main_methods_only():
     assert E.strides() == (1, 2, 3)
-    # and depthcluster without its selection, and without its brightness model
-    assert set(E.FRAME_RATE_ROWS) == {*E.MAIN, E.DC_NO_SELECT, E.DC_NO_BRIGHTNESS}
+    # and depthcluster without its selection, without its brightness model, without its depth gate
+    assert set(E.FRAME_RATE_ROWS) == {*E.MAIN, E.DC_NO_SELECT, E.DC_NO_BRIGHTNESS, E.DC_NO_GATE}
     for n in (2, 3):
         assert E.runs_for("real", stride=n) == list(E.FRAME_RATE_ROWS)
         assert E.runs_for("synthetic", "walking_xyz", stride=n) == []
@@ -218,7 +218,7 @@ def test_paper_a_ablation_has_the_paper_alone_each_addition_and_the_default_per_
 
     assert [r.label for r in E.runs_for("synthetic", "walking_rpy") if r.method == "depthcluster"] == [
         E.DEPTHCLUSTER.label, E.DC_PAPER.label, E.DC_PRIOR.label, E.DC_GROW.label, E.DC_CUT.label,
-        E.DC_BRIGHTNESS.label, E.DC_NO_SELECT.label, E.DC_NO_BRIGHTNESS.label]
+        E.DC_BRIGHTNESS.label, E.DC_GATE.label, E.DC_NO_SELECT.label, E.DC_NO_BRIGHTNESS.label, E.DC_NO_GATE.label]
     assert E.DC_PAPER in E.runs_for("real") and E.DC_PAPER not in E.runs_for("synthetic", "sitting_xyz")
     # each addition by itself: its own override missing, the others kept off
     offs = {k for k, _ in E.DC_PAPER.params}

@@ -162,3 +162,28 @@ def test_dense_alignments_sharing_a_pair_dict_equal_fresh_ones():
     # the masks select different pixels: the cache must not return the first call's points
     assert align(g0, d0, g1, d1, r.camera, mask_ref=left, shared=shared).valid_pixels < \
         align(g0, d0, g1, d1, r.camera, shared=shared).valid_pixels
+
+
+def test_dense_depth_gate_ignores_a_surface_that_enters_the_view():
+    """A near textured surface covering the right third of the current frame (a person entering
+    the view): with every correspondence in the sums it drags the pose away; left out where the two
+    depths differ by over 7 cm (``max_depth_diff_m``), the pose is recovered."""
+    import cv2
+
+    r = SceneRenderer("static_xyz", 0)
+    T_w_ref = r.pose(0.0)
+    T_cur_ref = se3_exp([0.02, -0.01, 0.015, 0.01, -0.02, 0.005])
+    g0, d0 = _clean_frame(r, T_w_ref)
+    g1, d1 = _clean_frame(r, T_w_ref @ invert(T_cur_ref))
+    H, W = g1.shape
+    texture = np.random.default_rng(0).random((H // 8, W // 8)).astype(np.float32)
+    texture = cv2.resize(texture, (W, H), interpolation=cv2.INTER_LINEAR)
+    near = slice(int(0.65 * W), W)
+    g1[:, near], d1[:, near] = texture[:, near], 0.9  # the scene's static surfaces lie 2.2-4.3 m away
+    errors = {}
+    for gate in (0.0, 0.07):
+        res = align(g0, d0, g1, d1, r.camera, config=DenseConfig(max_depth_diff_m=gate))
+        assert res.ok
+        errors[gate] = np.linalg.norm((invert(T_cur_ref) @ res.T_cur_ref)[:3, 3])
+    assert errors[0.07] < 2e-3
+    assert errors[0.0] > 0.01

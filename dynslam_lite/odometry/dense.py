@@ -78,6 +78,14 @@ class DenseConfig:
         leaves a residual spread (1.4826 MAD) of 0.010-0.013 instead of 0.021-0.031; on TUM
         fr2/desk the median stays below 0.003, on the synthetic scenes below 0.0001 (except
         walking_exposure, built with automatic exposure: ``tables/exposure.md``)
+    max_depth_diff_m : a correspondence whose depth in the current frame and transformed reference
+        depth differ by more than this (metres) is left out of both terms: two surfaces meet there
+        (an occluding or disoccluded one, e.g. a person entering the view or the wall behind one
+        who left), so neither residual compares a surface with itself and the Huber weights
+        would still let each such pixel pull the pose. 0 = every correspondence (eq. 5 as
+        printed, the default); 0.07 is the default ``maxDepthDiff`` of OpenCV's RGB-D odometry,
+        which rejects such correspondences the same way (paper A's method uses it, see
+        :class:`~dynslam_lite.depthcluster.method.DepthClusterConfig`)
     """
 
     levels: int = 4
@@ -92,6 +100,7 @@ class DenseConfig:
     min_valid_fraction: float = 0.02
     step_tolerance: float = 1e-6
     affine_brightness: bool = False
+    max_depth_diff_m: float = 0.0
 
 
 @dataclass
@@ -284,15 +293,25 @@ def align(
                 finite = np.isfinite(s @ ones) & np.isfinite(sd @ ones)
                 idx, s, sd = idx[finite], s[finite], sd[finite]
             I_A = np.take(I_ref, idx)
+            Pi = np.take(P, idx, axis=1)
             # the reference intensities, under the pair's gain and bias with affine_brightness
             r_I = s[:, 0] - (np.float32(ab[0]) * I_A + np.float32(ab[1]) if affine else I_A)
             w_I = _huber_weights(r_I, cfg.huber_intensity)
-            di = np.flatnonzero((sd[:, 2] > 0.999) & (s[:, 3] > 0))  # the samples with a depth residual
-            Pi = np.take(P, idx, axis=1)
+            with_depth = (sd[:, 2] > 0.999) & (s[:, 3] > 0)  # the samples with a depth residual
+            n = idx.size
+            if cfg.max_depth_diff_m > 0:  # two surfaces meet here: neither residual compares like with like
+                apart = (s[:, 3] > 0) & (np.abs(s[:, 3] - Pi[2]) > np.float32(cfg.max_depth_diff_m))
+                w_I[apart] = 0.0
+                with_depth &= ~apart
+                n -= int(np.count_nonzero(apart))
+                if n < min_valid:
+                    return DenseResult(T_prev, False, f"only {n} pixels of one surface at level {level}",
+                                       n, history + [costs], tuple(ab_prev))
+            di = np.flatnonzero(with_depth)
             sd, P_d = np.take(sd, di, axis=0), np.take(Pi, di, axis=1)
             r_D = s[di, 3] - P_d[2]
             w_D = _huber_weights(r_D, cfg.huber_depth_m) * np.float32(cfg.lambda_depth)
-            cost = float(np.sum(w_I * r_I**2) + np.sum(w_D * r_D**2)) / idx.size
+            cost = float(np.sum(w_I * r_I**2) + np.sum(w_D * r_D**2)) / n
             if not np.isfinite(cost):
                 return DenseResult(T_prev, False, "non-finite cost", idx.size, history + [costs], tuple(ab_prev))
             if cost > prev_cost * (1.0 + 1e-7):
@@ -300,7 +319,7 @@ def align(
                 break
             costs.append(cost)
             prev_cost = cost
-            valid_pixels = idx.size
+            valid_pixels = n
             # Jacobians only for an accepted pose (a rejected step ends the level)
             J_I = _geometric_jacobian(s[:, 1], s[:, 2], Pi, cam)
             J_D = _geometric_jacobian(sd[:, 0], sd[:, 1], P_d, cam)
